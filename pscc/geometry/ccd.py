@@ -1,0 +1,534 @@
+"""Conservative continuous collision detection (CCD) for vertex-face and edge-edge pairs.
+
+Vertices move linearly over the step, x(t) = (1 - t) x_t0 + t x_t1 with t in [0, 1]. Both primitive
+pairs reduce to the roots of one multilinear function of three parameters (the formulation of
+Tight Inclusion, Wang et al. 2021):
+
+- vertex-face (p; a, b, c):   F(t, u, v) = (p - a) + u (a - b) + v (a - c),  u, v >= 0, u + v <= 1
+- edge-edge (a0 a1; b0 b1):   F(t, u, v) = (a0 - b0) + u (a1 - a0) + v (b0 - b1),  u, v in [0, 1]
+
+with every point taken at time t. The pair comes within distance ``d_min`` at time t exactly when
+|F(t, u, v)| <= d_min for some admissible (u, v). F is linear in each parameter separately, so over
+a box of parameters its values lie in the bounding box of its 8 corner values.
+
+**Search.** A depth-first search over (t, u, v) boxes with a fixed per-thread stack. A box is
+*excluded* when the bounding box of its corner values, grown by the rounding bound ``err``, stays
+farther than ``d_min`` from the origin (Euclidean). Boxes are split along the parameter whose
+change moves F the most; the earlier half in t is searched first, and once a collision time
+``toi`` is known every box starting at or after it is skipped. A box that is too small to split
+(see :mod:`pscc.tolerances`) is reported as a collision at its start time. If the stack or the box
+budget runs out, the search stops and reports the earliest start time among the boxes not yet
+excluded. Hence:
+
+- a pair that truly comes within ``d_min`` is never missed, and
+- the reported time of impact is never later than the true first time of contact,
+
+provided ``err`` bounds the float32 rounding of F. That bound is derived in
+:data:`pscc.tolerances.CCD_ROUNDING_FACTOR`: per axis, ``err = 80 u M`` where u = 2^-24 and M is
+the largest coordinate magnitude after translating the query to its first point. The host
+wrappers add the rounding of float64 input to float32 when the input is not exactly float32, so
+the answer is conservative for the input as given.
+
+Every function here runs unchanged on CUDA and on the CPU.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from pscc import tolerances
+from pscc._checks import check_nonnegative, check_points
+
+wp.set_module_options({"enable_backward": False})
+
+_STACK = tolerances.CCD_STACK_SIZE
+_stack_vector = wp.types.vector(length=_STACK, dtype=wp.float32)
+
+NO_HIT: float = 2.0
+"""Value the device functions return as time of impact when there is no collision."""
+
+
+@wp.struct
+class CcdParameters:
+    """Tolerances of the CCD search (see :mod:`pscc.tolerances`), passed to every CCD kernel."""
+
+    rounding_factor: wp.float32
+    codomain_tolerance: wp.float32
+    min_parameter_width: wp.float32
+    comparison_margin: wp.float32
+    max_boxes: wp.int32
+
+
+def ccd_parameters() -> CcdParameters:
+    """Return the default :class:`CcdParameters` filled from :mod:`pscc.tolerances`."""
+    params = CcdParameters()
+    params.rounding_factor = tolerances.CCD_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
+    params.codomain_tolerance = tolerances.CCD_CODOMAIN_TOLERANCE
+    params.min_parameter_width = tolerances.CCD_MIN_PARAMETER_WIDTH
+    params.comparison_margin = tolerances.DISTANCE_COMPARISON_MARGIN
+    params.max_boxes = tolerances.CCD_MAX_BOXES
+    return params
+
+
+@wp.func
+def _abs_max(m: wp.vec3, x: wp.vec3) -> wp.vec3:
+    return wp.vec3(wp.max(m[0], wp.abs(x[0])), wp.max(m[1], wp.abs(x[1])), wp.max(m[2], wp.abs(x[2])))
+
+
+@wp.func
+def _lerp(x0: wp.vec3, x1: wp.vec3, t: float) -> wp.vec3:
+    # x0 + t (x1 - x0): the evaluation order the rounding bound was derived for.
+    return x0 + t * (x1 - x0)
+
+
+@wp.func
+def _gap_squared(lo: wp.vec3, hi: wp.vec3, err: wp.vec3) -> float:
+    """Squared distance from the origin to the box [lo - err, hi + err]."""
+    g = float(0.0)
+    for k in range(3):
+        below = lo[k] - err[k]
+        above = -(hi[k] + err[k])
+        d = wp.max(wp.max(below, above), 0.0)
+        g += d * d
+    return g
+
+
+@wp.func
+def _largest_change(
+    a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, c0: wp.vec3, c1: wp.vec3, d0: wp.vec3, d1: wp.vec3
+) -> float:
+    """Largest |component| of the differences x1 - x0 over four corner pairs along one parameter."""
+    m = wp.max(wp.max(wp.abs(a1 - a0), wp.abs(b1 - b0)), wp.max(wp.abs(c1 - c0), wp.abs(d1 - d0)))
+    return wp.max(m[0], wp.max(m[1], m[2]))
+
+
+@wp.func
+def _best_half_gap(
+    a0: wp.vec3,
+    a1: wp.vec3,
+    b0: wp.vec3,
+    b1: wp.vec3,
+    c0: wp.vec3,
+    c1: wp.vec3,
+    d0: wp.vec3,
+    d1: wp.vec3,
+    err: wp.vec3,
+) -> float:
+    """Larger squared gap of the two halves of a box split between the corner pairs (x0, x1).
+
+    Used only to choose the split (a heuristic): exclusion always re-evaluates F.
+    """
+    ma = 0.5 * (a0 + a1)
+    mb = 0.5 * (b0 + b1)
+    mc = 0.5 * (c0 + c1)
+    md = 0.5 * (d0 + d1)
+    mid_lo = wp.min(wp.min(ma, mb), wp.min(mc, md))
+    mid_hi = wp.max(wp.max(ma, mb), wp.max(mc, md))
+    low_lo = wp.min(mid_lo, wp.min(wp.min(a0, b0), wp.min(c0, d0)))
+    low_hi = wp.max(mid_hi, wp.max(wp.max(a0, b0), wp.max(c0, d0)))
+    high_lo = wp.min(mid_lo, wp.min(wp.min(a1, b1), wp.min(c1, d1)))
+    high_hi = wp.max(mid_hi, wp.max(wp.max(a1, b1), wp.max(c1, d1)))
+    return wp.max(_gap_squared(low_lo, low_hi, err), _gap_squared(high_lo, high_hi, err))
+
+
+@wp.func
+def _ccd_search(
+    q0: wp.vec3,
+    e10: wp.vec3,
+    e20: wp.vec3,
+    q1: wp.vec3,
+    e11: wp.vec3,
+    e21: wp.vec3,
+    triangle_domain: int,
+    err: wp.vec3,
+    scale: float,
+    minimum_distance: float,
+    params: CcdParameters,
+) -> float:
+    """Earliest t at which |q(t) + u e1(t) + v e2(t)| <= d_min may hold; ``NO_HIT`` if never.
+
+    q, e1, e2 are given at t = 0 and t = 1 and are evaluated at t by the exact expressions the
+    rounding bound assumes. ``triangle_domain`` = 1 restricts (u, v) to u + v <= 1.
+    """
+    stack_t0 = _stack_vector()
+    stack_t1 = _stack_vector()
+    stack_u0 = _stack_vector()
+    stack_u1 = _stack_vector()
+    stack_v0 = _stack_vector()
+    stack_v1 = _stack_vector()
+    stack_t0[0] = 0.0
+    stack_t1[0] = 1.0
+    stack_u0[0] = 0.0
+    stack_u1[0] = 1.0
+    stack_v0[0] = 0.0
+    stack_v1[0] = 1.0
+    count = int(1)
+    best = float(2.0)
+    boxes = int(0)
+    ms_sq = minimum_distance * minimum_distance * (1.0 + params.comparison_margin)
+    tolerance = params.codomain_tolerance * scale
+    min_width = params.min_parameter_width
+
+    while count > 0:
+        count -= 1
+        t0 = stack_t0[count]
+        t1 = stack_t1[count]
+        u0 = stack_u0[count]
+        u1 = stack_u1[count]
+        v0 = stack_v0[count]
+        v1 = stack_v1[count]
+        if t0 >= best:
+            continue
+        # Only times before the best collision found so far still matter.
+        t1 = wp.min(t1, best)
+        if triangle_domain == 1 and u0 + v0 > 1.0:
+            continue
+        boxes += 1
+        if boxes > params.max_boxes:
+            # Budget spent: report the earliest time not yet excluded (conservative).
+            best = wp.min(best, t0)
+            for s in range(count):
+                best = wp.min(best, stack_t0[s])
+            count = 0
+            continue
+
+        # F at the 8 corners, named f_<t><u><v> with 0 = lower and 1 = upper end of the range.
+        qa = _lerp(q0, q1, t0)
+        qb = _lerp(q0, q1, t1)
+        e1a = _lerp(e10, e11, t0)
+        e1b = _lerp(e10, e11, t1)
+        e2a = _lerp(e20, e21, t0)
+        e2b = _lerp(e20, e21, t1)
+        f000 = qa + u0 * e1a + v0 * e2a
+        f010 = qa + u1 * e1a + v0 * e2a
+        f001 = qa + u0 * e1a + v1 * e2a
+        f011 = qa + u1 * e1a + v1 * e2a
+        f100 = qb + u0 * e1b + v0 * e2b
+        f110 = qb + u1 * e1b + v0 * e2b
+        f101 = qb + u0 * e1b + v1 * e2b
+        f111 = qb + u1 * e1b + v1 * e2b
+        lo_a = wp.min(wp.min(f000, f010), wp.min(f001, f011))
+        lo = wp.min(lo_a, wp.min(wp.min(f100, f110), wp.min(f101, f111)))
+        hi_a = wp.max(wp.max(f000, f010), wp.max(f001, f011))
+        hi = wp.max(hi_a, wp.max(wp.max(f100, f110), wp.max(f101, f111)))
+
+        gap_sq = _gap_squared(lo, hi, err)
+        if gap_sq * (1.0 - params.comparison_margin) > ms_sq:
+            continue  # certainly farther than d_min everywhere in this box
+
+        width = hi - lo
+        small = width[0] <= tolerance and width[1] <= tolerance and width[2] <= tolerance
+        # Largest change of F along each parameter (F is linear in each one).
+        change_t = _largest_change(f000, f100, f010, f110, f001, f101, f011, f111)
+        change_u = _largest_change(f000, f010, f100, f110, f001, f011, f101, f111)
+        change_v = _largest_change(f000, f001, f100, f101, f010, f011, f110, f111)
+        can_t = (t1 - t0) > min_width and change_t > 0.0
+        can_u = (u1 - u0) > min_width and change_u > 0.0
+        can_v = (v1 - v0) > min_width and change_v > 0.0
+        if small or not (can_t or can_u or can_v) or count + 2 > _STACK:
+            best = wp.min(best, t0)  # cannot exclude and cannot (or need not) refine: collision
+            continue
+
+        # Choose the split: t when one of its halves can be excluded at once (the halves' corner
+        # values are averages of the parent's, as F is linear in t), else the parameter that
+        # moves F the most.
+        axis = int(-1)
+        biggest = float(-1.0)
+        if can_t:
+            gain_t = _best_half_gap(f000, f100, f010, f110, f001, f101, f011, f111, err)
+            if gain_t * (1.0 - params.comparison_margin) > ms_sq:
+                axis = 0
+        if axis < 0:
+            if can_t and change_t > biggest:
+                axis = 0
+                biggest = change_t
+            if can_u and change_u > biggest:
+                axis = 1
+                biggest = change_u
+            if can_v and change_v > biggest:
+                axis = 2
+                biggest = change_v
+        # Push the later half first so the earlier one is searched first.
+        for half in range(2):
+            nt0 = t0
+            nt1 = t1
+            nu0 = u0
+            nu1 = u1
+            nv0 = v0
+            nv1 = v1
+            if axis == 0:
+                mid = 0.5 * (t0 + t1)
+                if half == 0:
+                    nt0 = mid
+                else:
+                    nt1 = mid
+            elif axis == 1:
+                mid = 0.5 * (u0 + u1)
+                if half == 0:
+                    nu0 = mid
+                else:
+                    nu1 = mid
+            else:
+                mid = 0.5 * (v0 + v1)
+                if half == 0:
+                    nv0 = mid
+                else:
+                    nv1 = mid
+            stack_t0[count] = nt0
+            stack_t1[count] = nt1
+            stack_u0[count] = nu0
+            stack_u1[count] = nu1
+            stack_v0[count] = nv0
+            stack_v1[count] = nv1
+            count += 1
+    return best
+
+
+@wp.func
+def _query_error(scale_axes: wp.vec3, extra_error: float, params: CcdParameters) -> wp.vec3:
+    """Per-axis bound on |F_float32 - F_exact| for a query of per-axis magnitude ``scale_axes``."""
+    return params.rounding_factor * scale_axes + wp.vec3(extra_error, extra_error, extra_error)
+
+
+@wp.func
+def vertex_face_ccd_toi(
+    p_t0: wp.vec3,
+    a_t0: wp.vec3,
+    b_t0: wp.vec3,
+    c_t0: wp.vec3,
+    p_t1: wp.vec3,
+    a_t1: wp.vec3,
+    b_t1: wp.vec3,
+    c_t1: wp.vec3,
+    minimum_distance: float,
+    extra_error: float,
+    params: CcdParameters,
+) -> float:
+    """Conservative first time (in [0, 1]) at which vertex p comes within ``minimum_distance`` of
+    triangle (a, b, c); returns ``NO_HIT`` (2.0) when it provably never does.
+
+    ``extra_error`` is an absolute per-axis amount added to the rounding bound (e.g. for input
+    that was rounded to float32). With p_t1 = p_t0 etc. this is a conservative static proximity
+    test whose answer is 0 (hit) or ``NO_HIT``.
+    """
+    r = p_t0
+    yp0 = p_t0 - r
+    ya0 = a_t0 - r
+    yb0 = b_t0 - r
+    yc0 = c_t0 - r
+    yp1 = p_t1 - r
+    ya1 = a_t1 - r
+    yb1 = b_t1 - r
+    yc1 = c_t1 - r
+    m = wp.vec3(0.0, 0.0, 0.0)
+    m = _abs_max(m, yp0)
+    m = _abs_max(m, ya0)
+    m = _abs_max(m, yb0)
+    m = _abs_max(m, yc0)
+    m = _abs_max(m, yp1)
+    m = _abs_max(m, ya1)
+    m = _abs_max(m, yb1)
+    m = _abs_max(m, yc1)
+    err = _query_error(m, extra_error, params)
+    scale = wp.max(m[0], wp.max(m[1], m[2]))
+    return _ccd_search(
+        yp0 - ya0, ya0 - yb0, ya0 - yc0, yp1 - ya1, ya1 - yb1, ya1 - yc1,
+        1, err, scale, minimum_distance, params,
+    )
+
+
+@wp.func
+def edge_edge_ccd_toi(
+    a0_t0: wp.vec3,
+    a1_t0: wp.vec3,
+    b0_t0: wp.vec3,
+    b1_t0: wp.vec3,
+    a0_t1: wp.vec3,
+    a1_t1: wp.vec3,
+    b0_t1: wp.vec3,
+    b1_t1: wp.vec3,
+    minimum_distance: float,
+    extra_error: float,
+    params: CcdParameters,
+) -> float:
+    """Conservative first time (in [0, 1]) at which edge (a0, a1) comes within
+    ``minimum_distance`` of edge (b0, b1); ``NO_HIT`` (2.0) when it provably never does.
+
+    See :func:`vertex_face_ccd_toi` for ``extra_error`` and the static use.
+    """
+    r = a0_t0
+    ya00 = a0_t0 - r
+    ya10 = a1_t0 - r
+    yb00 = b0_t0 - r
+    yb10 = b1_t0 - r
+    ya01 = a0_t1 - r
+    ya11 = a1_t1 - r
+    yb01 = b0_t1 - r
+    yb11 = b1_t1 - r
+    m = wp.vec3(0.0, 0.0, 0.0)
+    m = _abs_max(m, ya00)
+    m = _abs_max(m, ya10)
+    m = _abs_max(m, yb00)
+    m = _abs_max(m, yb10)
+    m = _abs_max(m, ya01)
+    m = _abs_max(m, ya11)
+    m = _abs_max(m, yb01)
+    m = _abs_max(m, yb11)
+    err = _query_error(m, extra_error, params)
+    scale = wp.max(m[0], wp.max(m[1], m[2]))
+    return _ccd_search(
+        ya00 - yb00, ya10 - ya00, yb00 - yb10, ya01 - yb01, ya11 - ya01, yb01 - yb11,
+        0, err, scale, minimum_distance, params,
+    )
+
+
+@wp.kernel
+def _vertex_face_ccd_kernel(
+    # in:
+    points_t0: wp.array2d(dtype=wp.vec3),
+    points_t1: wp.array2d(dtype=wp.vec3),
+    extra_error: wp.array(dtype=wp.float32),
+    minimum_distance: float,
+    params: CcdParameters,
+    # out:
+    toi_out: wp.array(dtype=wp.float32),
+):
+    """One thread per vertex-face query."""
+    i = wp.tid()
+    toi_out[i] = vertex_face_ccd_toi(
+        points_t0[i, 0], points_t0[i, 1], points_t0[i, 2], points_t0[i, 3],
+        points_t1[i, 0], points_t1[i, 1], points_t1[i, 2], points_t1[i, 3],
+        minimum_distance, extra_error[i], params,
+    )
+
+
+@wp.kernel
+def _edge_edge_ccd_kernel(
+    # in:
+    points_t0: wp.array2d(dtype=wp.vec3),
+    points_t1: wp.array2d(dtype=wp.vec3),
+    extra_error: wp.array(dtype=wp.float32),
+    minimum_distance: float,
+    params: CcdParameters,
+    # out:
+    toi_out: wp.array(dtype=wp.float32),
+):
+    """One thread per edge-edge query."""
+    i = wp.tid()
+    toi_out[i] = edge_edge_ccd_toi(
+        points_t0[i, 0], points_t0[i, 1], points_t0[i, 2], points_t0[i, 3],
+        points_t1[i, 0], points_t1[i, 1], points_t1[i, 2], points_t1[i, 3],
+        minimum_distance, extra_error[i], params,
+    )
+
+
+def input_rounding_error(points_t0: np.ndarray, points_t1: np.ndarray) -> np.ndarray:
+    """Per-query bound on how much rounding the input to float32 can move F, per axis.
+
+    Zero for queries whose coordinates are exactly float32. Otherwise 2 u max|x| (F is affine in
+    the 8 points with coefficients whose absolute values sum to at most 2 per axis, and rounding
+    moves each coordinate by at most u |x|), enlarged by 1 % for the float32 evaluation.
+
+    Args:
+        points_t0: (n, 4, 3) array of any real dtype, as the user gave it.
+        points_t1: (n, 4, 3) array, likewise.
+
+    Returns:
+        (n,) float32 absolute error per query.
+    """
+    error = np.zeros(points_t0.shape[0], dtype=np.float32)
+    for points in (points_t0, points_t1):
+        as_given = np.asarray(points, dtype=np.float64)
+        changed = (as_given != as_given.astype(np.float32).astype(np.float64)).reshape(len(as_given), -1)
+        inexact = changed.any(axis=1)
+        if inexact.any():
+            magnitude = np.abs(as_given).reshape(len(as_given), -1).max(axis=1)
+            bound = 2.02 * tolerances.FLOAT32_UNIT_ROUNDOFF * magnitude
+            error = np.maximum(error, np.where(inexact, bound, 0.0).astype(np.float32))
+    return error
+
+
+def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device) -> tuple[np.ndarray, np.ndarray]:
+    raw_t0 = np.asarray(points_t0.numpy() if isinstance(points_t0, wp.array) else points_t0)
+    raw_t1 = np.asarray(points_t1.numpy() if isinstance(points_t1, wp.array) else points_t1)
+    x0 = check_points(raw_t0, "points_t0", shape_tail=(4, 3))
+    x1 = check_points(raw_t1, "points_t1", shape_tail=(4, 3))
+    if x0.shape != x1.shape:
+        from pscc.errors import InputError
+
+        raise InputError("argument", "points_t1", f"shape {x1.shape} differs from points_t0 {x0.shape}",
+                         "pass start and end positions of the same queries")
+    distance = check_nonnegative(minimum_distance, "minimum_distance")
+    count = x0.shape[0]
+    if count == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.float32)
+    extra = input_rounding_error(raw_t0, raw_t1)
+    device = wp.get_device(device)
+    toi = wp.empty(count, dtype=wp.float32, device=device)
+    wp.launch(
+        kernel,
+        dim=count,
+        inputs=[
+            wp.array(x0, dtype=wp.vec3, device=device),
+            wp.array(x1, dtype=wp.vec3, device=device),
+            wp.array(extra, dtype=wp.float32, device=device),
+            float(distance),
+            ccd_parameters(),
+        ],
+        outputs=[toi],
+        device=device,
+    )
+    toi_host = toi.numpy()
+    hit = toi_host <= 1.0
+    return hit, np.where(hit, toi_host, np.float32(np.inf)).astype(np.float32)
+
+
+def vertex_face_ccd(
+    points_t0: np.ndarray | wp.array,
+    points_t1: np.ndarray | wp.array,
+    minimum_distance: float = 0.0,
+    *,
+    device: str | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched conservative vertex-face CCD.
+
+    Args:
+        points_t0: (n, 4, 3) positions at t = 0, ordered [vertex, f0, f1, f2].
+        points_t1: (n, 4, 3) positions at t = 1, same order.
+        minimum_distance: report the pair when the vertex comes within this Euclidean distance of
+            the triangle (0 = touching), in the units of the points.
+        device: Warp device to run on (default: Warp's default device).
+
+    Returns:
+        ``(hit, toi)``: (n,) bool and (n,) float32. ``toi`` is a lower bound of the first time of
+        contact for hits and ``inf`` otherwise. Never misses a contact of the input as given.
+
+    Raises:
+        InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
+    """
+    return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device)
+
+
+def edge_edge_ccd(
+    points_t0: np.ndarray | wp.array,
+    points_t1: np.ndarray | wp.array,
+    minimum_distance: float = 0.0,
+    *,
+    device: str | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched conservative edge-edge CCD.
+
+    Args:
+        points_t0: (n, 4, 3) positions at t = 0, ordered [a0, a1, b0, b1].
+        points_t1: (n, 4, 3) positions at t = 1, same order.
+        minimum_distance: Euclidean distance at which the edges count as colliding (0 = touching).
+        device: Warp device to run on.
+
+    Returns:
+        ``(hit, toi)`` as in :func:`vertex_face_ccd`.
+
+    Raises:
+        InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
+    """
+    return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device)

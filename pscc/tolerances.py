@@ -1,0 +1,51 @@
+"""Every floating-point tolerance of pscc, with its unit and the guarantee it buys.
+
+Device arithmetic is IEEE float32 with round-to-nearest. ``FLOAT32_UNIT_ROUNDOFF`` (u = 2^-24)
+bounds the relative error of one operation. Kernels receive these values as arguments; no kernel
+holds a literal epsilon.
+"""
+
+from __future__ import annotations
+
+FLOAT32_UNIT_ROUNDOFF: float = 2.0**-24
+"""u: the relative rounding error of one float32 operation (dimensionless)."""
+
+CCD_ROUNDING_FACTOR: float = 80.0
+"""Multiple of ``u * M`` that bounds the float32 error of one evaluation of the CCD function F.
+
+F(t, u, v) = q(t) + u e1(t) + v e2(t) (see :mod:`pscc.geometry.ccd`) is evaluated from coordinates
+translated by the query's first point; M is the largest |translated coordinate| on that axis.
+A forward error analysis of the evaluation order gives |F_float32 - F_exact| <= 63 u M per axis,
+plus 2 u M for the rounding of the translation itself: 65 u M. 80 leaves a margin for the
+second-order terms and for M being read off rounded values. Dimensionless.
+"""
+
+CCD_CODOMAIN_TOLERANCE: float = 1.0e-5
+"""Relative size (times the query's local scale M) below which a CCD box is not split further.
+
+A box that cannot be excluded and whose image is this small is reported as a collision. False
+positives therefore only occur for pairs whose minimal distance over the step is within about
+``(2 * CCD_ROUNDING_FACTOR * u + CCD_CODOMAIN_TOLERANCE) * sqrt(3) * M`` of the requested minimum
+distance. Dimensionless.
+"""
+
+CCD_MIN_PARAMETER_WIDTH: float = 2.0**-16
+"""Smallest width of a (t, u, v) box along one parameter before that parameter is no longer split.
+
+Bounds the depth of the search at 3 * 16 = 48 splits, so the fixed per-thread stack of
+``CCD_STACK_SIZE`` boxes never overflows. Dimensionless (parameters live in [0, 1]).
+"""
+
+CCD_STACK_SIZE: int = 64
+"""Boxes on the per-thread depth-first stack of the CCD search (a compile-time constant)."""
+
+CCD_MAX_BOXES: int = 4096
+"""Boxes one CCD query may examine; past this it stops and reports a collision at the earliest
+time not yet excluded (conservative: never a miss, never a late time of impact)."""
+
+DISTANCE_COMPARISON_MARGIN: float = 1.0e-6
+"""Relative margin on squared-distance comparisons against the minimum distance.
+
+Each side of ``gap^2 > d_min^2`` carries a few float32 roundings (relative error < 8 u ~ 5e-7),
+so a box is only excluded when ``gap^2 (1 - margin) > d_min^2 (1 + margin)``. Dimensionless.
+"""

@@ -1,0 +1,229 @@
+"""Conservative float32 CCD: exact benchmark queries, ipctk in float64, constructed contacts, degenerate cases."""
+
+from __future__ import annotations
+
+import glob
+import os
+from fractions import Fraction
+
+import ipctk
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pscc.errors import InputError
+from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "data", "ccd-queries")
+
+
+def _load_queries(folder: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read the benchmark's rational CSV files: 8 rows per query, exact truth in column 7."""
+    coords = []
+    truth = []
+    for path in sorted(glob.glob(os.path.join(folder, "*.csv"))):
+        with open(path) as handle:
+            for line in handle:
+                n = [int(x) for x in line.strip().split(",")]
+                coords.append([float(Fraction(n[0], n[1])), float(Fraction(n[2], n[3])),
+                               float(Fraction(n[4], n[5]))])
+                truth.append(n[6])
+    points = np.array(coords, dtype=np.float64).reshape(-1, 8, 3)
+    return points[:, :4], points[:, 4:], np.array(truth).reshape(-1, 8)[:, 0].astype(bool)
+
+
+QUERY_SETS = sorted(
+    os.path.relpath(d, DATA) for d in glob.glob(os.path.join(DATA, "*", "*")) if os.path.isdir(d)
+)
+
+
+def test_query_sets_are_present() -> None:
+    assert len(QUERY_SETS) == 12
+
+
+@pytest.mark.parametrize("query_set", QUERY_SETS)
+def test_no_false_negative_on_benchmark_queries(query_set: str, device: str) -> None:
+    x0, x1, truth = _load_queries(os.path.join(DATA, query_set))
+    ccd = vertex_face_ccd if query_set.endswith("vertex-face") else edge_edge_ccd
+    hit, toi = ccd(x0, x1, device=device)
+    missed = np.flatnonzero(truth & ~hit)
+    assert missed.size == 0, f"{query_set}: missed positive queries {missed.tolist()}"
+    assert np.all((toi[hit] >= 0.0) & (toi[hit] <= 1.0))
+    assert np.all(np.isinf(toi[~hit]))
+
+
+def _ipc_ccd(
+    kind: str, x0: np.ndarray, x1: np.ndarray, min_distance: float = 0.0, scale: float = 1.0
+) -> tuple[bool, float]:
+    # ipctk's tolerance is absolute (in the units of F): scale it with the query.
+    ccd = ipctk.TightInclusionCCD(tolerance=1e-7 * scale, max_iterations=10_000_000, conservative_rescaling=1.0)
+    fn = ccd.point_triangle_ccd if kind == "vf" else ccd.edge_edge_ccd
+    args = [np.asarray(p, dtype=np.float64) for p in (*x0, *x1)]
+    return fn(*args, min_distance=min_distance)
+
+
+def _random_batch(rng: np.random.Generator, kind: str, count: int, scale: float, shift: np.ndarray):
+    """Half random motions, half motions built to touch at a known time t_star."""
+    x0 = rng.uniform(-1.0, 1.0, (count, 4, 3))
+    x1 = x0 + rng.normal(0.0, 0.8, (count, 4, 3))
+    t_star = np.full(count, np.inf)
+    for i in range(count // 2):
+        ts = rng.uniform(0.0, 1.0)
+        velocity = rng.normal(0.0, 1.0, (4, 3))
+        at = rng.uniform(-1.0, 1.0, (4, 3))
+        if kind == "vf":
+            w = rng.dirichlet([1.0, 1.0, 1.0])
+            at[0] = w[0] * at[1] + w[1] * at[2] + w[2] * at[3]
+        else:
+            s, u = rng.uniform(0.0, 1.0, 2)
+            # Move b so that its point at parameter u meets a's point at parameter s.
+            pa = (1 - s) * at[0] + s * at[1]
+            pb = (1 - u) * at[2] + u * at[3]
+            at[2:] += pa - pb
+        x0[i] = at - ts * velocity
+        x1[i] = at + (1.0 - ts) * velocity
+        t_star[i] = ts
+    return x0 * scale + shift, x1 * scale + shift, t_star
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    kind=st.sampled_from(["vf", "ee"]),
+    scale=st.sampled_from([1e-3, 1.0, 50.0]),
+    offset=st.sampled_from([0.0, 1.0, 300.0]),
+)
+def test_against_ipctk_and_constructed_contacts(seed: int, kind: str, scale: float, offset: float) -> None:
+    rng = np.random.default_rng(seed)
+    shift = rng.uniform(-1.0, 1.0, 3) * offset
+    x0, x1, t_star = _random_batch(rng, kind, 48, scale, shift)
+    ccd = vertex_face_ccd if kind == "vf" else edge_edge_ccd
+    hit, toi = ccd(x0, x1)
+    # Built to touch at t_star: must be reported no later than t_star.
+    built = np.isfinite(t_star)
+    assert np.all(hit[built])
+    assert np.all(toi[built] <= t_star[built] + 1e-7)
+    for i in range(len(x0)):
+        ipc_hit, ipc_toi = _ipc_ccd(kind, x0[i], x1[i], scale=scale)
+        if ipc_hit:
+            assert hit[i], f"query {i}: ipctk reports contact at {ipc_toi}, pscc misses it"
+            assert toi[i] <= ipc_toi + 1e-3, f"query {i}: toi {toi[i]} later than ipctk's {ipc_toi}"
+        elif hit[i]:
+            # A false positive must be a near miss: within the documented tolerance band, which
+            # includes the rounding of float64 input to float32 (2 u |x| per axis).
+            local = np.abs(x0[i] - x0[i][0]).max() + np.abs(x1[i] - x0[i][0]).max()
+            rounding = 2.0**-24 * max(np.abs(x0[i]).max(), np.abs(x1[i]).max())
+            band = 1e-4 * local + 8.0 * rounding
+            near, _ = _ipc_ccd(kind, x0[i], x1[i], min_distance=band, scale=scale)
+            assert near, f"query {i}: pscc reports a contact that is not even a near miss"
+
+
+def _vf(p0, a0, b0, c0, p1, a1, b1, c1):
+    return np.array([[p0, a0, b0, c0]], np.float32), np.array([[p1, a1, b1, c1]], np.float32)
+
+
+def _ee(a0, a1, b0, b1, c0, c1, d0, d1):
+    return np.array([[a0, a1, b0, b1]], np.float32), np.array([[c0, c1, d0, d1]], np.float32)
+
+
+TRI = ([0, 0, 0], [1, 0, 0], [0, 1, 0])
+
+
+@pytest.mark.parametrize(
+    "name, x0, x1, expect_hit, toi_at_most",
+    [
+        ("vertex through interior", *_vf([0.2, 0.2, 1], *TRI, [0.2, 0.2, -1], *TRI), True, 0.5),
+        ("vertex misses beside", *_vf([2, 2, 1], *TRI, [2, 2, -1], *TRI), False, None),
+        ("vertex on face at t=0", *_vf([0.3, 0.3, 0], *TRI, [0.3, 0.3, 1], *TRI), True, 0.0),
+        ("vertex reaches face at t=1", *_vf([0.3, 0.3, 1], *TRI, [0.3, 0.3, 0], *TRI), True, 1.0),
+        ("vertex hits face edge", *_vf([0.5, 0, 1], *TRI, [0.5, 0, -1], *TRI), True, 0.5),
+        ("vertex hits face vertex", *_vf([1, 0, 1], *TRI, [1, 0, -1], *TRI), True, 0.5),
+        ("vertex slides in face plane", *_vf([-1, 0.2, 0], *TRI, [2, 0.2, 0], *TRI), True, 1 / 3),
+        ("zero-area face, vertex crosses its segment",
+         *_vf([0.5, 0.5, 1], [0, 0, 0], [1, 1, 0], [2, 2, 0], [0.5, 0.5, -1], [0, 0, 0], [1, 1, 0], [2, 2, 0]),
+         True, 0.5),
+        ("zero-area face, vertex passes beside",
+         *_vf([0.5, -0.5, 1], [0, 0, 0], [1, 1, 0], [2, 2, 0], [0.5, -0.5, -1], [0, 0, 0], [1, 1, 0], [2, 2, 0]),
+         False, None),
+        ("all face vertices coincide",
+         *_vf([0, 0, 1], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, -1], [0, 0, 0], [0, 0, 0], [0, 0, 0]),
+         True, 0.5),
+        ("one-ulp motion onto the face",
+         *_vf([0.3, 0.3, np.float32(2**-24)], *TRI, [0.3, 0.3, 0], *TRI), True, 1.0),
+        ("static, far", *_vf([0.3, 0.3, 1], *TRI, [0.3, 0.3, 1], *TRI), False, None),
+    ],
+)
+def test_vertex_face_named_cases(name, x0, x1, expect_hit, toi_at_most, device) -> None:
+    hit, toi = vertex_face_ccd(x0, x1, device=device)
+    assert bool(hit[0]) == expect_hit, name
+    if expect_hit:
+        assert toi[0] <= toi_at_most + 1e-7, name
+        assert toi[0] >= toi_at_most - 1e-3, f"{name}: toi {toi[0]} needlessly early"
+
+
+@pytest.mark.parametrize(
+    "name, x0, x1, expect_hit, toi_at_most",
+    [
+        ("crossing edges", *_ee([0, 0, 1], [1, 0, 1], [0.5, -1, 0], [0.5, 1, 0],
+                                [0, 0, -1], [1, 0, -1], [0.5, -1, 0], [0.5, 1, 0]), True, 0.5),
+        ("parallel edges meet at t=1", *_ee([0, 0, 1], [1, 0, 1], [0, 0, 0], [1, 0, 0],
+                                            [0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0]), True, 1.0),
+        ("parallel edges stay apart", *_ee([0, 0, 1], [1, 0, 1], [0, 0, 0], [1, 0, 0],
+                                           [0, 1, 1], [1, 1, 1], [0, 0, 0], [1, 0, 0]), False, None),
+        ("collinear overlapping at t=0", *_ee([0, 0, 0], [1, 0, 0], [0.5, 0, 0], [2, 0, 0],
+                                              [0, 0, 0], [1, 0, 0], [0.5, 0, 0], [2, 0, 0]), True, 0.0),
+        ("collinear disjoint, approach", *_ee([0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0],
+                                              [0, 0, 0], [1, 0, 0], [0.5, 0, 0], [1.5, 0, 0]), True, 2 / 3),
+        ("endpoint touches endpoint", *_ee([0, 0, 0], [1, 0, 0], [1, 1, 0], [1, 2, 0],
+                                           [0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 1, 0]), True, 1.0),
+        ("zero-length edge crosses edge", *_ee([0.5, 0.5, 1], [0.5, 0.5, 1], [0, 0.5, 0], [1, 0.5, 0],
+                                               [0.5, 0.5, -1], [0.5, 0.5, -1], [0, 0.5, 0], [1, 0.5, 0]),
+         True, 0.5),
+        ("skew edges pass", *_ee([0, 0, 1], [1, 0, 1], [2, -1, 0], [2, 1, 0],
+                                 [0, 0, -1], [1, 0, -1], [2, -1, 0], [2, 1, 0]), False, None),
+    ],
+)
+def test_edge_edge_named_cases(name, x0, x1, expect_hit, toi_at_most, device) -> None:
+    hit, toi = edge_edge_ccd(x0, x1, device=device)
+    assert bool(hit[0]) == expect_hit, name
+    if expect_hit:
+        assert toi[0] <= toi_at_most + 1e-7, name
+        assert toi[0] >= toi_at_most - 1e-3, f"{name}: toi {toi[0]} needlessly early"
+
+
+def test_minimum_distance(device: str) -> None:
+    # The vertex stops 0.05 above the face.
+    x0, x1 = _vf([0.2, 0.2, 1], *TRI, [0.2, 0.2, 0.05], *TRI)
+    hit, toi = vertex_face_ccd(x0, x1, 0.1, device=device)
+    assert hit[0] and toi[0] <= (1 - 0.1) / 0.95 + 1e-7
+    hit, _ = vertex_face_ccd(x0, x1, 0.01, device=device)
+    assert not hit[0]
+    # Parallel edges 0.3 apart, static.
+    e0, e1 = _ee([0, 0, 0.3], [1, 0, 0.3], [0, 0, 0], [1, 0, 0], [0, 0, 0.3], [1, 0, 0.3], [0, 0, 0], [1, 0, 0])
+    assert edge_edge_ccd(e0, e1, 0.31, device=device)[0][0]
+    assert not edge_edge_ccd(e0, e1, 0.29, device=device)[0][0]
+
+
+def test_empty_batch_and_bad_input() -> None:
+    hit, toi = vertex_face_ccd(np.zeros((0, 4, 3)), np.zeros((0, 4, 3)))
+    assert hit.shape == (0,) and toi.shape == (0,)
+    with pytest.raises(InputError, match="points_t0"):
+        vertex_face_ccd(np.zeros((2, 3, 3)), np.zeros((2, 3, 3)))
+    with pytest.raises(InputError, match="points_t1"):
+        edge_edge_ccd(np.zeros((2, 4, 3)), np.zeros((3, 4, 3)))
+    bad = np.zeros((1, 4, 3))
+    bad[0, 1, 2] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        edge_edge_ccd(bad, np.zeros((1, 4, 3)))
+    with pytest.raises(InputError, match="minimum_distance"):
+        edge_edge_ccd(np.zeros((1, 4, 3)), np.zeros((1, 4, 3)), -1.0)
+
+
+def test_deterministic(device: str) -> None:
+    rng = np.random.default_rng(7)
+    x0 = rng.uniform(-1, 1, (500, 4, 3)).astype(np.float32)
+    x1 = (x0 + rng.normal(0, 0.5, x0.shape)).astype(np.float32)
+    first = vertex_face_ccd(x0, x1, device=device)
+    second = vertex_face_ccd(x0, x1, device=device)
+    assert np.array_equal(first[0], second[0]) and np.array_equal(first[1], second[1])
