@@ -39,7 +39,7 @@ Bounds the depth of the search at 3 * 16 = 48 splits, so the fixed per-thread st
 CCD_STACK_SIZE: int = 64
 """Boxes on the per-thread depth-first stack of the CCD search (a compile-time constant)."""
 
-CCD_MAX_BOXES: int = 4096
+CCD_MAX_BOXES: int = 16384
 """Boxes one CCD query may examine; past this it stops and reports a collision at the earliest
 time not yet excluded (conservative: never a miss, never a late time of impact)."""
 
@@ -48,4 +48,12 @@ DISTANCE_COMPARISON_MARGIN: float = 1.0e-6
 
 Each side of ``gap^2 > d_min^2`` carries a few float32 roundings (relative error < 8 u ~ 5e-7),
 so a box is only excluded when ``gap^2 (1 - margin) > d_min^2 (1 + margin)``. Dimensionless.
+"""
+
+BOX_RELATIVE_PAD: float = 2.0**-21
+"""Relative growth (times the largest |coordinate| of a box) of every bounding box.
+
+Growing a box by ``pad = d/2 + BOX_RELATIVE_PAD * max|x|`` and rounding ``min - pad`` or
+``max + pad`` to float32 moves the face by at most u |x| = 2^-24 |x|, well inside the 8 u |x| added;
+so a pair closer than d always has overlapping boxes. Dimensionless.
 """

@@ -94,6 +94,15 @@ def _max_abs(v: wp.vec3) -> float:
 
 
 @wp.func
+def _robust_length(v: wp.vec3) -> float:
+    """Euclidean length of ``v`` without underflow or overflow of the squared components."""
+    m = _max_abs(v)
+    if m > 0.0:
+        return m * wp.length(v * (1.0 / m))
+    return 0.0
+
+
+@wp.func
 def _clamped_ratio(num: float, den: float) -> float:
     """``clamp(num / den, 0, 1)``, or 0 when ``den`` is not positive."""
     if den > 0.0:
@@ -137,44 +146,53 @@ def _triangle_edges_closest_point(ap: wp.vec3, ab: wp.vec3, ac: wp.vec3) -> wp.v
 
 
 @wp.func
-def _triangle_voronoi_closest_point(ap: wp.vec3, ab: wp.vec3, ac: wp.vec3) -> wp.vec3:
+def _triangle_voronoi_closest_point(
+    ap: wp.vec3, ab: wp.vec3, ac: wp.vec3, bc: wp.vec3, n: wp.vec3
+) -> wp.vec3:
     """Barycentric weights of the closest point of a regular triangle, by Voronoi regions.
 
-    Coordinates are relative to vertex ``a``. Falls back to the edge method if rounding makes
-    the face region empty.
+    Coordinates are relative to vertex ``a``; ``bc = ac - ab`` and ``n = ab x ac``. The region
+    tests of the edges use the signed face weights in the Lagrange form ``n . (ab x ap)`` (equal
+    to the usual ``d1 d4 - d3 d2`` products of dot products, but with error ``EPS32 / sin`` rather
+    than ``EPS32 / sin^2`` for a triangle of flatness ``sin^2``). Falls back to the edge method if
+    rounding makes the face region empty.
     """
+    # Vertex a.
     d1 = wp.dot(ab, ap)
     d2 = wp.dot(ac, ap)
     if d1 <= 0.0 and d2 <= 0.0:
         return wp.vec3(1.0, 0.0, 0.0)
 
+    # Vertex b.
     bp = ap - ab
     d3 = wp.dot(ab, bp)
-    d4 = wp.dot(ac, bp)
-    if d3 >= 0.0 and d4 <= d3:
+    e3 = wp.dot(bc, bp)
+    if d3 >= 0.0 and e3 <= 0.0:
         return wp.vec3(0.0, 1.0, 0.0)
 
-    vc = d1 * d4 - d3 * d2
+    # Edge ab: outside the face across ab (vc <= 0) and between the vertex regions of a and b.
+    vc = wp.dot(n, wp.cross(ab, ap))
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = _clamped_ratio(d1, d1 - d3)
+        v = _clamped_ratio(d1, wp.dot(ab, ab))
         return wp.vec3(1.0 - v, v, 0.0)
 
+    # Vertex c.
     cp = ap - ac
-    d5 = wp.dot(ab, cp)
     d6 = wp.dot(ac, cp)
-    if d6 >= 0.0 and d5 <= d6:
+    e6 = wp.dot(bc, cp)
+    if d6 >= 0.0 and e6 >= 0.0:
         return wp.vec3(0.0, 0.0, 1.0)
 
-    vb = d5 * d2 - d1 * d6
+    # Edge ac.
+    vb = wp.dot(n, wp.cross(ap, ac))
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = _clamped_ratio(d2, d2 - d6)
+        w = _clamped_ratio(d2, wp.dot(ac, ac))
         return wp.vec3(1.0 - w, 0.0, w)
 
-    va = d3 * d6 - d5 * d4
-    e43 = d4 - d3
-    e56 = d5 - d6
-    if va <= 0.0 and e43 >= 0.0 and e56 >= 0.0:
-        w = _clamped_ratio(e43, e43 + e56)
+    # Edge bc.
+    va = wp.dot(n, wp.cross(bc, bp))
+    if va <= 0.0 and e3 >= 0.0 and e6 <= 0.0:
+        w = _clamped_ratio(e3, wp.dot(bc, bc))
         return wp.vec3(0.0, 1.0 - w, w)
 
     # Face region. Rounding can leave a weight slightly negative; clamp and renormalise.
@@ -239,7 +257,7 @@ def vertex_face_closest_point(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) ->
     edge_sq = wp.max(wp.max(wp.dot(ab, ab), wp.dot(ac, ac)), wp.dot(bc, bc))
     if area_sq <= _TRIANGLE_DEGENERATE_REL_SQ * edge_sq * edge_sq:
         return _triangle_edges_closest_point(ap, ab, ac)
-    return _triangle_voronoi_closest_point(ap, ab, ac)
+    return _triangle_voronoi_closest_point(ap, ab, ac, bc, n)
 
 
 @wp.func
@@ -350,7 +368,7 @@ def _vertex_face_distance_kernel(points: wp.array2d(dtype=wp.vec3), distances: w
     b = points[i, 2]
     c = points[i, 3]
     w = vertex_face_closest_point(p, a, b, c)
-    distances[i] = wp.length(_vertex_face_offset(p, a, b, c, w))
+    distances[i] = _robust_length(_vertex_face_offset(p, a, b, c, w))
 
 
 @wp.kernel
@@ -366,7 +384,7 @@ def _vertex_face_closest_point_kernel(
     b = points[i, 2]
     c = points[i, 3]
     w = vertex_face_closest_point(p, a, b, c)
-    distances[i] = wp.length(_vertex_face_offset(p, a, b, c, w))
+    distances[i] = _robust_length(_vertex_face_offset(p, a, b, c, w))
     weights[i] = w
 
 
@@ -379,7 +397,7 @@ def _edge_edge_distance_kernel(points: wp.array2d(dtype=wp.vec3), distances: wp.
     b0 = points[i, 2]
     b1 = points[i, 3]
     st = edge_edge_closest_point(a0, a1, b0, b1)
-    distances[i] = wp.length(_edge_edge_offset(a0, a1, b0, b1, st))
+    distances[i] = _robust_length(_edge_edge_offset(a0, a1, b0, b1, st))
 
 
 @wp.kernel
@@ -395,7 +413,7 @@ def _edge_edge_closest_point_kernel(
     b0 = points[i, 2]
     b1 = points[i, 3]
     st = edge_edge_closest_point(a0, a1, b0, b1)
-    distances[i] = wp.length(_edge_edge_offset(a0, a1, b0, b1, st))
+    distances[i] = _robust_length(_edge_edge_offset(a0, a1, b0, b1, st))
     params[i] = st
 
 

@@ -40,32 +40,46 @@ is below the rounding noise of the query's coordinates, so collapsing it moves t
 point by at most ``EPS32 * L``, inside the documented error bound.
 """
 
-EDGE_PARALLEL_REL_SQ: float = 1.0e-10
+EDGE_PARALLEL_REL_SQ: float = EPS32 * EPS32
 """Parallel threshold on ``|e_a x e_b|^2 / (|e_a|^2 |e_b|^2)`` = ``sin^2(angle)`` (dimensionless).
 
-At or below it the two edges are treated as parallel: the first edge's start is fixed, the
-second edge's parameter is optimised, and then the first edge's parameter is re-optimised,
-which finds a true minimising pair for parallel segments. Rationale: the line-line solution
-loses about ``EPS32 / sin(angle)`` relative accuracy, while the parallel treatment of edges at
-angle ``< 1e-5`` rad costs at most ``sin(angle) * L``; ``1e-10`` keeps both around ``1e-5 * L``.
+At or below it the line-line solution is skipped (it would divide by a vanishing
+``|e_a x e_b|^2``) and the search starts from ``s = 0``: the second edge's parameter is
+optimised for it and, if clamped, the first edge's parameter is re-optimised. For parallel
+segments every start gives a true minimising pair, and for edges at an angle below ``EPS32``
+the start costs at most ``sin(angle) * L <= EPS32 * L``. Rationale: the line-line parameter is
+written with cross products, ``s = (n . (e_b x r)) / |n|^2``, which stays accurate down to
+angles of about ``EPS32`` (measured), so the threshold only has to keep the division finite.
+"""
+
+WELL_SHAPED_MIN_FLATNESS: float = 1.0e-2
+"""Smallest triangle flatness ``|ab x ac|^2 / max_edge_length^4`` that counts as well-shaped.
+
+Dimensionless; ``1e-3`` means a height of about 3 % of the longest edge (an equilateral
+triangle has ``0.75``). Zero-area triangles (flatness exactly 0) count as well-shaped too,
+since they are handled exactly. Every edge pair counts as well-shaped. Rationale: below it the
+vertex-face error grows like ``0.2 * EPS32 * L / sqrt(flatness)`` (measured) and can exceed
+:data:`DISTANCE_ERROR_CONST`.
 """
 
 DISTANCE_ERROR_CONST: float = 16.0
-"""The constant ``C`` of the documented bound ``|d_float32 - d_exact| <= C * EPS32 * L``.
+"""The constant ``C`` of the bound ``|d_float32 - d_exact| <= C * EPS32 * L`` (dimensionless).
 
-It holds for well-shaped queries (triangle flatness ratio above ``1e-4`` and edge angles above
-about ``1e-2`` rad) whose exact answer was computed in float64 from the same float32 inputs.
-Rationale: each of the few float32 operations between the input and the distance rounds with
-relative error ``EPS32 / 2`` of quantities of size ``L``; the largest error measured over the
-randomised tests is about ``3 * EPS32 * L``, and 16 leaves a safety factor of about 5.
+``d_exact`` is the exact distance between the float32 input points and ``L`` the largest
+absolute coordinate difference among the four points. The bound holds for well-shaped
+queries (see :data:`WELL_SHAPED_MIN_FLATNESS`). Rationale: about ten float32 operations, each
+with relative rounding error ``EPS32 / 2`` on quantities of size ``L``, separate the input from
+the distance; the largest error measured over millions of random queries is about
+``6 * EPS32 * L``, so 16 leaves a safety factor of more than 2.
 """
 
 ILL_CONDITIONED_REL_ERROR: float = 1.0e-3
-"""Relative error bound ``|d_float32 - d_exact| / L`` for near-degenerate queries (dimensionless).
+"""Bound on ``(d_float32 - d_exact) / L`` for nearly flat triangles (dimensionless).
 
-Near-degenerate means nearly flat triangles and nearly parallel edges, where the closest point
-itself is ill-conditioned. The computed closest point is always a point of both primitives
-(up to rounding), so the computed distance is never below ``d_exact - C * EPS32 * L``; it can
-be too large by up to about ``sqrt(EPS32) * L``. Rationale: the worst over-estimate measured in
-the randomised near-degenerate tests is below ``4e-4 * L``.
+For triangles of flatness below :data:`WELL_SHAPED_MIN_FLATNESS` the closest point, not the
+distance, is ill-conditioned. The computed weights are always a convex combination, so the
+computed distance is never below ``d_exact - C * EPS32 * L``; it can be too large, by about
+``0.2 * EPS32 * L / sqrt(flatness)`` above :data:`TRIANGLE_DEGENERATE_REL_SQ` and by at most
+half the triangle's height below it, which meet at about ``sqrt(EPS32) * L``. Rationale: the
+worst over-estimate measured is about ``2.5e-4 * L``; ``1e-3`` leaves a factor of 4.
 """

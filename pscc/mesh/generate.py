@@ -87,7 +87,9 @@ def grid_sheet(
     return vertices, faces, rest
 
 
-def _best_rows(triangle_count: int, ny_guess: float, columns_for: Callable[[int], list[int]]) -> tuple[int, int]:
+def _best_rows(
+    triangle_count: int, ny_guess: float, columns_for: Callable[[int], list[int]]
+) -> tuple[int, int]:
     """Pick ``(ny, nx)`` near ``ny_guess`` so that ``2 * nx * ny`` is closest to the request.
 
     ``columns_for(ny)`` returns the candidate column counts for a row count.

@@ -166,8 +166,9 @@ def _check_path(path: str | os.PathLike[str]) -> tuple[Path, str]:
         raise InputError(str(file_path), "extension", f"extension {shown} is not supported",
                          "use one of " + ", ".join(SUPPORTED_EXTENSIONS) + " (case-insensitive)")
     if not file_path.exists():
+        where = "" if file_path.is_absolute() else f" (relative to {os.getcwd()!r})"
         raise InputError(str(file_path), "path", "file does not exist",
-                         f"check the path {str(file_path)!r} (relative to {os.getcwd()!r})")
+                         f"check the path {str(file_path)!r}{where}")
     if not file_path.is_file():
         raise InputError(str(file_path), "path", "is not a regular file",
                          f"pass the path of a mesh file, not {str(file_path)!r}")

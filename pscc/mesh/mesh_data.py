@@ -84,7 +84,8 @@ def _check_point_array(value: Any, name: str, source: str, tail: tuple[int, ...]
     """Validate a float point array like :func:`check_points` and return an owned float32 copy."""
     expected = "(n, " + ", ".join(str(s) for s in tail) + ")"
     array = _to_array(value, name, source, expected)
-    checked = check_points(array, name, shape_tail=tail, source=source)
+    with np.errstate(over="ignore"):  # values beyond float32 become Inf and are reported as such
+        checked = check_points(array, name, shape_tail=tail, source=source)
     # check_points may return the caller's own buffer; the mesh must own its arrays.
     return np.array(checked, dtype=np.float32, order="C", copy=True)
 

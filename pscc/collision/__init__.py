@@ -1,0 +1,1 @@
+"""Collision detection: broad phases, candidate buffers, narrow phase and the detector interface."""
