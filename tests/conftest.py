@@ -5,7 +5,7 @@ from __future__ import annotations
 import warp as wp
 import pytest
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 

@@ -34,6 +34,16 @@ METHODS: tuple[str, ...] = ("brute-force",)
 """Detection methods available through :class:`CollisionDetector`."""
 
 
+def resolve_device(device: str | None) -> wp.Device:
+    """Return the Warp device for a name, or raise :class:`InputError` listing the devices."""
+    try:
+        return wp.get_device(device)
+    except (RuntimeError, ValueError) as exc:
+        names = ", ".join(d.alias for d in wp.get_devices())
+        raise InputError("argument", "device", f"{device!r} is not available ({exc})",
+                         f"use one of: {names}") from exc
+
+
 @dataclass
 class CollisionResult:
     """Pairs found by one :meth:`CollisionDetector.detect` call; rows sorted lexicographically.
@@ -85,7 +95,7 @@ class CollisionDetector:
             raise InputError("argument", "faces", f"dtype {faces_np.dtype} is not an integer type",
                              "pass vertex ids as integers")
         self.method = method
-        self.device = wp.get_device(device)
+        self.device = resolve_device(device)
         self._faces_np = np.ascontiguousarray(faces_np, dtype=np.int32)
         self._object_ids_np = None if object_ids is None else as_numpy(object_ids)
         self._vertex_count: int | None = None

@@ -1,0 +1,148 @@
+"""Command-line interface: ``pscc detect`` and ``pscc demo`` (also ``python -m pscc``).
+
+The CLI only parses arguments, calls the public API and prints. Any :class:`pscc.PsccError`
+becomes one line on stderr and exit status 2; nothing is written in that case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pscc.errors import InputError, PsccError
+
+EXIT_INPUT_ERROR = 2
+"""Exit status for bad input (any :class:`pscc.PsccError`)."""
+
+
+def _write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Write an NPZ file through a temporary file in the same folder and an atomic rename."""
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(str(path), "--out", f"folder {folder} does not exist", "create it or pick another path")
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            np.savez(stream, **arrays)
+        os.replace(temporary, path)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
+
+
+def _result_arrays(result: Any) -> dict[str, np.ndarray]:
+    arrays = {"vertex_face": result.vertex_face, "edge_edge": result.edge_edge}
+    if result.vertex_face_toi is not None:
+        arrays["vertex_face_toi"] = result.vertex_face_toi
+        arrays["edge_edge_toi"] = result.edge_edge_toi
+    return arrays
+
+
+def _print_summary(stats: dict[str, Any]) -> None:
+    seconds = stats["seconds"]
+    print(f"mesh: {stats['vertex_count']} vertices, {stats['face_count']} faces, {stats['edge_count']} edges")
+    print(f"mode: {stats['mode']} (thickness {stats['thickness']:g}), method: {stats['method']}")
+    print(f"bounding-volume tests: {stats['bv_tests']:,}; candidate feature pairs: {stats['candidate_pairs']:,}")
+    print(f"colliding pairs: {stats['vertex_face_pairs']:,} vertex-face, {stats['edge_edge_pairs']:,} edge-edge")
+    stages = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in seconds.items() if k != "total")
+    print(f"time: {seconds['total']:.3f} s ({stages})")
+    print(f"device memory: {stats['device_bytes']['total'] / 2**20:.2f} MiB")
+
+
+def _detect(args: argparse.Namespace) -> int:
+    from pscc.collision.detector import CollisionDetector
+    from pscc.mesh.io import load_mesh, load_positions
+
+    mesh = load_mesh(args.mesh)
+    positions_end = mesh.vertices_end
+    if args.end is not None:
+        positions_end = load_positions(args.end, mesh.vertex_count)
+    out = Path(args.out) if args.out else None
+    if out is not None and out.suffix.lower() != ".npz":
+        raise InputError(str(out), "--out", "the output must be an .npz file", "end the path in .npz")
+    detector = CollisionDetector(mesh.faces, method=args.method, object_ids=mesh.object_ids, device=args.device)
+    result = detector.detect(mesh.vertices, positions_end, thickness=args.thickness)
+    if out is not None:
+        _write_npz_atomic(out, _result_arrays(result))
+    if args.json:
+        print(json.dumps(result.stats))
+    else:
+        _print_summary(result.stats)
+        if out is not None:
+            print(f"pairs written to {out}")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from pscc.collision.detector import CollisionDetector
+    from pscc.mesh.generate import folded_sheet
+
+    out_dir = Path(args.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    print(f"Generating a three-layer folded cloth of about {args.triangles:,} triangles ...")
+    mesh = folded_sheet(args.triangles, layers=3, seed=0)
+    detector = CollisionDetector(mesh.faces, method=args.method, device=args.device)
+    print("Continuous collision detection over one step (start -> end positions):")
+    ccd = detector.detect(mesh.vertices, mesh.vertices_end, thickness=0.0)
+    _print_summary(ccd.stats)
+    thickness = float(args.thickness)
+    print(f"\nDiscrete proximity detection at the end of the step (thickness {thickness:g}):")
+    dcd = detector.detect(mesh.vertices_end, thickness=thickness)
+    _print_summary(dcd.stats)
+    _write_npz_atomic(out_dir / "ccd_pairs.npz", _result_arrays(ccd))
+    _write_npz_atomic(out_dir / "dcd_pairs.npz", _result_arrays(dcd))
+    _write_npz_atomic(out_dir / "mesh.npz", {"vertices": mesh.vertices, "faces": mesh.faces,
+                                             "vertices_end": mesh.vertices_end, "rest": mesh.rest})
+    stats_path = out_dir / "stats.json"
+    stats_path.write_text(json.dumps({"ccd": ccd.stats, "dcd": dcd.stats}, indent=2))
+    print(f"\nWrote {out_dir}/mesh.npz, ccd_pairs.npz, dcd_pairs.npz and stats.json")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``pscc`` command."""
+    from pscc.collision.detector import METHODS
+
+    parser = argparse.ArgumentParser(prog="pscc", description="PSCC collision detection on NVIDIA Warp.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    detect = sub.add_parser("detect", help="find colliding vertex-face and edge-edge pairs of a mesh")
+    detect.add_argument("mesh", help="mesh file (.obj, .ply or .npz); an NPZ may carry vertices_end")
+    detect.add_argument("--end", help="mesh file with the end-of-step positions (runs CCD)")
+    detect.add_argument("--thickness", type=float, default=0.0, help="proximity distance (default 0)")
+    detect.add_argument("--method", default=METHODS[0], choices=METHODS, help="detection method")
+    detect.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
+    detect.add_argument("--out", help="write the pairs to this .npz file")
+    detect.add_argument("--json", action="store_true", help="print the stats as one JSON line")
+    detect.set_defaults(run=_detect)
+
+    demo = sub.add_parser("demo", help="detect collisions on a generated folded cloth and print stats")
+    demo.add_argument("--triangles", type=int, default=20000, help="triangles of the cloth (default 20000)")
+    demo.add_argument("--thickness", type=float, default=0.005, help="proximity distance for DCD")
+    demo.add_argument("--method", default=METHODS[0], choices=METHODS, help="detection method")
+    demo.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
+    demo.add_argument("--out-dir", default="demo-output", help="folder for the outputs")
+    demo.set_defaults(run=_demo)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``pscc`` command; return its exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    try:
+        return int(args.run(args))
+    except PsccError as error:
+        print(f"pscc: error: {error}", file=sys.stderr)
+        return EXIT_INPUT_ERROR

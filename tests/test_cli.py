@@ -1,0 +1,105 @@
+"""``pscc detect`` and ``pscc demo``: outputs, JSON stats, and bad input (exit 2, nothing written)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pscc.cli import main
+from pscc.mesh import folded_sheet
+
+
+@pytest.fixture(scope="module")
+def sheet():
+    return folded_sheet(1000, layers=3, seed=0)
+
+
+def _write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_detect_npz_with_end_positions(tmp_path: Path, sheet, capsys) -> None:
+    mesh = tmp_path / "sheet.npz"
+    np.savez(mesh, vertices=sheet.vertices, faces=sheet.faces, vertices_end=sheet.vertices_end)
+    out = tmp_path / "pairs.npz"
+    assert main(["detect", str(mesh), "--out", str(out), "--json"]) == 0
+    stats = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert stats["mode"] == "ccd" and stats["method"] == "brute-force"
+    with np.load(out) as pairs:
+        assert set(pairs.files) == {"vertex_face", "edge_edge", "vertex_face_toi", "edge_edge_toi"}
+        assert pairs["vertex_face"].shape == (stats["vertex_face_pairs"], 2)
+        assert pairs["edge_edge"].shape == (stats["edge_edge_pairs"], 4)
+        assert stats["vertex_face_pairs"] + stats["edge_edge_pairs"] > 0
+
+
+def test_detect_obj_with_separate_end_mesh_and_dcd(tmp_path: Path, sheet, capsys) -> None:
+    start = tmp_path / "start.obj"
+    end = tmp_path / "end.obj"
+    _write_obj(start, sheet.vertices, sheet.faces)
+    _write_obj(end, sheet.vertices_end, sheet.faces)
+    assert main(["detect", str(start), "--end", str(end), "--json"]) == 0
+    ccd = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert ccd["mode"] == "ccd"
+    out = tmp_path / "dcd.npz"
+    assert main(["detect", str(start), "--thickness", "0.01", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "dcd" in printed and "pairs written" in printed
+    with np.load(out) as pairs:
+        assert set(pairs.files) == {"vertex_face", "edge_edge"}
+
+
+BAD_FILES = {
+    "missing.obj": None,
+    "mesh.stl": "solid x\nendsolid x\n",
+    "quad.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
+    "range.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 7\n",
+    "nan.obj": "v 0 0 0\nv nan 0 0\nv 1 1 0\nf 1 2 3\n",
+    "dup.obj": "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nf 3 1 2\n",
+    "empty.obj": "# nothing\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+def test_bad_input_exits_2_and_writes_nothing(tmp_path: Path, name: str, capsys) -> None:
+    path = tmp_path / name
+    if BAD_FILES[name] is not None:
+        path.write_text(BAD_FILES[name])
+    out = tmp_path / "pairs.npz"
+    assert main(["detect", str(path), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pscc: error: ") and "Fix:" in lines[0]
+    assert name in lines[0]
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ([name] if BAD_FILES[name] is not None else [])
+
+
+def test_bad_npz_fields(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "bad.npz"
+    np.savez(path, vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]), vertices_end=np.zeros((4, 3)))
+    assert main(["detect", str(path), "--out", str(tmp_path / "p.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "vertices_end" in err and "Fix:" in err
+    assert not (tmp_path / "p.npz").exists()
+
+
+def test_bad_options(tmp_path: Path, sheet, capsys) -> None:
+    mesh = tmp_path / "sheet.npz"
+    np.savez(mesh, vertices=sheet.vertices, faces=sheet.faces)
+    assert main(["detect", str(mesh), "--thickness", "-1"]) == 2
+    assert "thickness" in capsys.readouterr().err
+    assert main(["detect", str(mesh), "--out", str(tmp_path / "p.txt")]) == 2
+    assert "--out" in capsys.readouterr().err
+    assert main(["detect", str(mesh), "--device", "cuda:9"]) == 2
+    assert "device" in capsys.readouterr().err
+
+
+def test_demo_writes_outputs(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--triangles", "400", "--out-dir", str(tmp_path)]) == 0
+    assert {"mesh.npz", "ccd_pairs.npz", "dcd_pairs.npz", "stats.json"} <= {p.name for p in tmp_path.iterdir()}
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["ccd"]["mode"] == "ccd" and stats["dcd"]["mode"] == "dcd"
