@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import warp as wp
 import pytest
+import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 wp.init()

@@ -12,7 +12,6 @@ from pscc.collision.detector import CollisionDetector
 from pscc.errors import InputError
 from pscc.mesh import MeshTopology, folded_sheet, grid_sheet
 
-
 BAND = 1e-3
 """Near-miss band (absolute; the test meshes have unit size) a reported pair must fall within:
 the tolerance band of :mod:`pscc.tolerances`, widened for queries that spend their box budget."""

@@ -1,0 +1,1 @@
+"""Benchmarks of pscc (``make bench``): they write ``BENCHMARKS.md``; no timing is asserted in tests."""
