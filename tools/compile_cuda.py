@@ -25,6 +25,8 @@ def kernel_modules() -> list[str]:
     """Names of the pscc modules that define at least one Warp kernel."""
     names = []
     for info in pkgutil.walk_packages(pscc.__path__, prefix="pscc."):
+        if info.name.endswith("__main__"):
+            continue  # entry points run on import
         module = importlib.import_module(info.name)
         warp_module = wp.get_module(module.__name__)
         if warp_module.kernels:
