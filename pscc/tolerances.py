@@ -57,3 +57,18 @@ Growing a box by ``pad = d/2 + BOX_RELATIVE_PAD * max|x|`` and rounding ``min - 
 ``max + pad`` to float32 moves the face by at most u |x| = 2^-24 |x|, well inside the 8 u |x| added;
 so a pair closer than d always has overlapping boxes. Dimensionless.
 """
+
+NORMAL_CONE_MARGIN: float = 1.0e-5
+"""Relative margin of the normal-cone and contour sign tests (:mod:`pscc.geometry.normal_cone`).
+
+A direction d counts as seeing a face only when d . n > margin |n|, and a signed area
+S = ((o - b) x (a - b)) . l counts as non-zero only when |S| > margin |o - b| |a - b|. The float32
+rounding of these dot and cross products is below 8 u (about 5e-7) of the same products of lengths,
+so every sign the tests rely on is the true sign: the certificate is never granted by rounding.
+Dimensionless.
+"""
+
+DEGENERATE_FACE_RATIO: float = 1.0e-10
+"""A face with |n|^2 <= ratio |e1|^2 |e2|^2 (sine of its corner angle below 1e-5) is degenerate: its
+normal is noise, so its normal-cone mask is empty and no node containing it is certified.
+Dimensionless."""
