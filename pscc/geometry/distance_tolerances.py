@@ -1,9 +1,12 @@
-"""Named tolerances of the DCD distance primitives in :mod:`pscc.geometry.distance`.
+"""Named tolerances and error constants of the DCD distance primitives (:mod:`pscc.geometry.distance`).
 
-All tolerances except :data:`MIN_LOCAL_SCALE` are dimensionless. The kernels first scale each
-query by ``1 / L``, where ``L`` is the largest absolute coordinate difference between the anchor
-point (the triangle's first vertex or the first edge's first endpoint) and the other three
-points, so a relative tolerance compares quantities measured in units of the query's own size.
+All values except :data:`MIN_LOCAL_SCALE` are dimensionless. The kernels shift each query to
+its anchor point (the triangle's first vertex, or the first edge's first endpoint) and scale it
+by ``1 / L``, where ``L`` is the largest absolute coordinate difference between the anchor and
+the other three points; every relative threshold therefore compares quantities measured in
+units of the query's own size. Triangle "flatness" is ``|ab x ac|^2 / max_edge_length^4``,
+about ``(smallest height / longest edge)^2``: ``0.75`` for an equilateral triangle, ``0`` for a
+zero-area one.
 """
 
 from __future__ import annotations
@@ -15,33 +18,32 @@ MIN_LOCAL_SCALE: float = 1.0e-30
 """Smallest local scale ``L`` (length units) that is resolved; below it the query is one point.
 
 Rationale: ``1 / L`` must stay a finite normal float32 (``1 / 1e-30 = 1e30 < 3.4e38``). Queries
-whose four points all lie within ``1e-30`` of each other report the anchor as the closest point;
-the distance error this causes is below ``1e-30`` length units.
+whose four points all lie within ``1e-30`` of each other report the anchor as the closest point,
+an error below ``1e-30`` length units.
 """
 
 TRIANGLE_DEGENERATE_REL_SQ: float = 1.0e-8
-"""Zero-area threshold on ``|ab x ac|^2 / max_edge_length^4`` (dimensionless).
+"""Zero-area threshold on the triangle flatness ``|ab x ac|^2 / max_edge_length^4``.
 
-The ratio equals ``(2 * area / max_edge_length^2)^2``, the squared sine-like "flatness" of the
-triangle (about ``(height / longest edge)^2``). At or below the threshold the triangle is
-treated as the union of its three edges (segments), whose closest points need no division by
-the area. Rationale: the Voronoi-region barycentric weights lose about ``EPS32 / ratio``
-relative accuracy, while treating a flat triangle as its edges costs at most its height,
-``sqrt(ratio) * max_edge_length``. ``1e-8`` (height ``1e-4`` of the longest edge) keeps both
-effects at the ``1e-4`` relative level at the switch-over and away from NaN/Inf for exactly
-degenerate input.
+At or below it the triangle is treated as the union of its three edges (segments), whose
+closest points need no division by the area; collinear and coincident vertices land here.
+Rationale: above it, the Voronoi-region weights are accurate to about
+``0.4 * EPS32 / sqrt(flatness)`` (measured) relative to the triangle size; below it, treating
+the triangle as its edges moves the closest point by at most the inradius, less than half the
+smallest height ``sqrt(flatness) * max_edge_length``. ``1e-8`` (smallest height ``1e-4`` of the
+longest edge) puts the switch where both effects are about ``sqrt(EPS32)`` relative.
 """
 
 EDGE_DEGENERATE_REL_SQ: float = EPS32 * EPS32
-"""Zero-length threshold on ``|edge|^2 / L^2`` (dimensionless).
+"""Zero-length threshold on ``|edge|^2 / L^2``.
 
-An edge shorter than ``EPS32 * L`` is treated as its first endpoint. Rationale: such an edge
-is below the rounding noise of the query's coordinates, so collapsing it moves the closest
-point by at most ``EPS32 * L``, inside the documented error bound.
+An edge shorter than ``EPS32 * L`` is treated as its first endpoint. Rationale: such an edge is
+below the rounding noise of the query's coordinates, so collapsing it moves the closest point
+by at most ``EPS32 * L``, inside the documented error bound.
 """
 
 EDGE_PARALLEL_REL_SQ: float = EPS32 * EPS32
-"""Parallel threshold on ``|e_a x e_b|^2 / (|e_a|^2 |e_b|^2)`` = ``sin^2(angle)`` (dimensionless).
+"""Parallel threshold on ``|e_a x e_b|^2 / (|e_a|^2 |e_b|^2)`` = ``sin^2(angle)``.
 
 At or below it the line-line solution is skipped (it would divide by a vanishing
 ``|e_a x e_b|^2``) and the search starts from ``s = 0``: the second edge's parameter is
@@ -53,33 +55,34 @@ angles of about ``EPS32`` (measured), so the threshold only has to keep the divi
 """
 
 WELL_SHAPED_MIN_FLATNESS: float = 1.0e-2
-"""Smallest triangle flatness ``|ab x ac|^2 / max_edge_length^4`` that counts as well-shaped.
+"""Smallest triangle flatness that counts as well-shaped for the error bound.
 
-Dimensionless; ``1e-3`` means a height of about 3 % of the longest edge (an equilateral
-triangle has ``0.75``). Zero-area triangles (flatness exactly 0) count as well-shaped too,
-since they are handled exactly. Every edge pair counts as well-shaped. Rationale: below it the
-vertex-face error grows like ``0.2 * EPS32 * L / sqrt(flatness)`` (measured) and can exceed
-:data:`DISTANCE_ERROR_CONST`.
+``1e-2`` is a smallest height of about 10 % of the longest edge. Zero-area triangles (flatness
+exactly 0) count as well-shaped too, since they are handled exactly, and so does every edge
+pair (the edge-edge bound was measured to hold for all angles). Rationale: below it the
+vertex-face error grows like ``0.4 * EPS32 * L / sqrt(flatness)`` (measured) and would exceed
+:data:`DISTANCE_ERROR_CONST` below a flatness of about ``1e-3``.
 """
 
 DISTANCE_ERROR_CONST: float = 16.0
-"""The constant ``C`` of the bound ``|d_float32 - d_exact| <= C * EPS32 * L`` (dimensionless).
+"""The constant ``C`` of the bound ``|d_float32 - d_exact| <= C * EPS32 * L``.
 
 ``d_exact`` is the exact distance between the float32 input points and ``L`` the largest
 absolute coordinate difference among the four points. The bound holds for well-shaped
 queries (see :data:`WELL_SHAPED_MIN_FLATNESS`). Rationale: about ten float32 operations, each
 with relative rounding error ``EPS32 / 2`` on quantities of size ``L``, separate the input from
-the distance; the largest error measured over millions of random queries is about
-``6 * EPS32 * L``, so 16 leaves a safety factor of more than 2.
+the distance, which gives ``C`` of a few units; the largest error measured over 7e7 random
+queries of each kind is ``3.7 * EPS32 * L`` (vertex-face) and ``3.3 * EPS32 * L`` (edge-edge),
+so 16 leaves a safety factor above 4.
 """
 
 ILL_CONDITIONED_REL_ERROR: float = 1.0e-3
-"""Bound on ``(d_float32 - d_exact) / L`` for nearly flat triangles (dimensionless).
+"""Bound on ``(d_float32 - d_exact) / L`` for triangles below :data:`WELL_SHAPED_MIN_FLATNESS`.
 
-For triangles of flatness below :data:`WELL_SHAPED_MIN_FLATNESS` the closest point, not the
-distance, is ill-conditioned. The computed weights are always a convex combination, so the
-computed distance is never below ``d_exact - C * EPS32 * L``; it can be too large, by about
-``0.2 * EPS32 * L / sqrt(flatness)`` above :data:`TRIANGLE_DEGENERATE_REL_SQ` and by at most
-half the triangle's height below it, which meet at about ``sqrt(EPS32) * L``. Rationale: the
-worst over-estimate measured is about ``2.5e-4 * L``; ``1e-3`` leaves a factor of 4.
+For nearly flat triangles the closest point, not the distance, is ill-conditioned. The computed
+weights are always a convex combination, so the computed distance is never below
+``d_exact - C * EPS32 * L``; it can be too large, by about ``0.4 * EPS32 * L / sqrt(flatness)``
+above :data:`TRIANGLE_DEGENERATE_REL_SQ` and by at most half the smallest height below it; the
+two meet at about ``sqrt(EPS32) * L ~ 3.5e-4 * L``. Rationale: the worst over-estimate measured
+is ``2.9e-4 * L``; ``1e-3`` leaves a factor above 3.
 """
