@@ -87,7 +87,7 @@ def _random_batch(rng: np.random.Generator, kind: str, count: int, scale: float,
     return x0 * scale + shift, x1 * scale + shift, t_star
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=30, deadline=None)
 @given(
     seed=st.integers(0, 2**31 - 1),
     kind=st.sampled_from(["vf", "ee"]),
