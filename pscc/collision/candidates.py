@@ -72,6 +72,8 @@ class CandidatePairs:
             CapacityError: more pairs than one int32-indexed buffer can hold.
         """
         counts = self.counts.numpy().astype(np.int64)
+        if np.any(counts < 0):
+            raise CapacityError("candidate counter overflowed int32; reduce the thickness or split the scene")
         self._host_counts = counts
         fits = True
         if counts[0] > self.capacity_vf:
@@ -81,6 +83,21 @@ class CandidatePairs:
             self.edge_edge = self._grown(counts[1], "edge_edge")
             fits = False
         return fits
+
+    def ensure(self, capacity_vf: int, capacity_ee: int) -> None:
+        """Grow the buffers (contents are not kept) to hold at least the given numbers of pairs.
+
+        Allocates: only when a buffer is too small. Capture-safe: no.
+        """
+        if capacity_vf > self.capacity_vf:
+            self.vertex_face = self._grown(capacity_vf, "vertex_face")
+        if capacity_ee > self.capacity_ee:
+            self.edge_edge = self._grown(capacity_ee, "edge_edge")
+
+    def set_counts(self, vertex_face_count: int, edge_edge_count: int) -> None:
+        """Record pair counts known on the host (for producers that size their output exactly)."""
+        self._host_counts = np.array([vertex_face_count, edge_edge_count], dtype=np.int64)
+        self.counts.assign(np.array([vertex_face_count, edge_edge_count], dtype=np.int32))
 
     @property
     def vertex_face_count(self) -> int:

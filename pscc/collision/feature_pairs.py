@@ -1,0 +1,221 @@
+"""From candidate triangle pairs to vertex-face and edge-edge feature pairs, each emitted once.
+
+Every vertex and every edge is *owned* by exactly one of its incident faces (the one with the lowest
+id). For a candidate triangle pair (A, B) the features tested are: vertices owned by A against face
+B, vertices owned by B against face A, and edges owned by A against edges owned by B; pairs that
+share a vertex are skipped. Each feature pair then comes from exactly one triangle pair (its
+owners), and none is lost: a feature lies inside its owner's box, so the owner's box overlaps
+whatever the feature's box overlaps.
+
+========================  ===================  ==============================================
+buffer                    shape, dtype         meaning
+========================  ===================  ==============================================
+owned_vertex_bits         (face_count,) int32  bit k set: the face owns its vertex k
+owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge k (face_edges)
+========================  ===================  ==============================================
+
+Extraction is count -> exclusive scan -> fill, so the output order depends only on the order of
+the triangle pairs (deterministic on every device).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from pscc.collision.candidates import CandidatePairs
+from pscc.mesh.topology import MeshTopology
+
+wp.set_module_options({"enable_backward": False})
+
+
+def ownership_bits(faces: np.ndarray, topology: MeshTopology) -> tuple[np.ndarray, np.ndarray]:
+    """Per-face bit masks of owned vertices and owned edges (owner = lowest incident face id)."""
+    face_count = faces.shape[0]
+    vertex_owner = np.full(topology.vertex_count, -1, dtype=np.int64)
+    starts = topology.vertex_face_offsets[:-1]
+    has_faces = np.diff(topology.vertex_face_offsets) > 0
+    vertex_owner[has_faces] = topology.vertex_face_indices[starts[has_faces]]
+    edge_owner = topology.edge_face_indices[topology.edge_face_offsets[:-1]].astype(np.int64)
+    ids = np.arange(face_count)[:, None]
+    vertex_bits = ((vertex_owner[faces] == ids) * (1 << np.arange(3))).sum(axis=1)
+    edge_bits = ((edge_owner[topology.face_edges] == ids) * (1 << np.arange(3))).sum(axis=1)
+    return vertex_bits.astype(np.int32), edge_bits.astype(np.int32)
+
+
+@wp.func
+def _shares_vertex(f: wp.vec3i, v: int) -> bool:
+    return f[0] == v or f[1] == v or f[2] == v
+
+
+@wp.func
+def _edges_share_vertex(a: wp.vec2i, b: wp.vec2i) -> bool:
+    return a[0] == b[0] or a[0] == b[1] or a[1] == b[0] or a[1] == b[1]
+
+
+@wp.func
+def _vertex_face_count(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
+                       owner: int, other: int) -> int:
+    """Vertices owned by face ``owner`` that do not belong to face ``other``."""
+    tri = faces[owner]
+    target = faces[other]
+    bits = owned_vertex_bits[owner]
+    count = int(0)
+    for k in range(3):
+        if (bits >> k) & 1:
+            if not _shares_vertex(target, tri[k]):
+                count += 1
+    return count
+
+
+@wp.func
+def _vertex_face_fill(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
+                      owner: int, other: int, slot: int, out: wp.array(dtype=wp.vec2i)) -> int:
+    """Write (vertex, other) for the vertices counted by :func:`_vertex_face_count`; return the count."""
+    tri = faces[owner]
+    target = faces[other]
+    bits = owned_vertex_bits[owner]
+    count = int(0)
+    for k in range(3):
+        if (bits >> k) & 1:
+            if not _shares_vertex(target, tri[k]):
+                out[slot + count] = wp.vec2i(tri[k], other)
+                count += 1
+    return count
+
+
+@wp.kernel
+def _count_features(
+    # in:
+    faces: wp.array(dtype=wp.vec3i),
+    face_edges: wp.array(dtype=wp.vec3i),
+    edges: wp.array(dtype=wp.vec2i),
+    owned_vertex_bits: wp.array(dtype=wp.int32),
+    owned_edge_bits: wp.array(dtype=wp.int32),
+    triangle_pairs: wp.array(dtype=wp.vec2i),
+    # out:
+    vertex_face_counts: wp.array(dtype=wp.int32),
+    edge_edge_counts: wp.array(dtype=wp.int32),
+):
+    """One thread per triangle pair: how many feature pairs it emits."""
+    i = wp.tid()
+    pair = triangle_pairs[i]
+    a = pair[0]
+    b = pair[1]
+    vf = _vertex_face_count(faces, owned_vertex_bits, a, b) + _vertex_face_count(faces, owned_vertex_bits, b, a)
+    ee = int(0)
+    bits_a = owned_edge_bits[a]
+    bits_b = owned_edge_bits[b]
+    for j in range(3):
+        if (bits_a >> j) & 1:
+            for k in range(3):
+                if (bits_b >> k) & 1:
+                    if not _edges_share_vertex(edges[face_edges[a][j]], edges[face_edges[b][k]]):
+                        ee += 1
+    vertex_face_counts[i] = vf
+    edge_edge_counts[i] = ee
+
+
+@wp.kernel
+def _fill_features(
+    # in:
+    faces: wp.array(dtype=wp.vec3i),
+    face_edges: wp.array(dtype=wp.vec3i),
+    edges: wp.array(dtype=wp.vec2i),
+    owned_vertex_bits: wp.array(dtype=wp.int32),
+    owned_edge_bits: wp.array(dtype=wp.int32),
+    triangle_pairs: wp.array(dtype=wp.vec2i),
+    vertex_face_offsets: wp.array(dtype=wp.int32),
+    edge_edge_offsets: wp.array(dtype=wp.int32),
+    # out:
+    vertex_face_out: wp.array(dtype=wp.vec2i),
+    edge_edge_out: wp.array(dtype=wp.vec2i),
+):
+    """One thread per triangle pair: write its feature pairs at its scanned offsets."""
+    i = wp.tid()
+    pair = triangle_pairs[i]
+    a = pair[0]
+    b = pair[1]
+    slot = vertex_face_offsets[i]
+    slot += _vertex_face_fill(faces, owned_vertex_bits, a, b, slot, vertex_face_out)
+    _vertex_face_fill(faces, owned_vertex_bits, b, a, slot, vertex_face_out)
+    slot = edge_edge_offsets[i]
+    bits_a = owned_edge_bits[a]
+    bits_b = owned_edge_bits[b]
+    for j in range(3):
+        if (bits_a >> j) & 1:
+            for k in range(3):
+                if (bits_b >> k) & 1:
+                    ea = face_edges[a][j]
+                    eb = face_edges[b][k]
+                    if not _edges_share_vertex(edges[ea], edges[eb]):
+                        edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
+                        slot += 1
+
+
+class FeaturePairs:
+    """Turns candidate triangle pairs into candidate feature pairs (layout in the module docstring).
+
+    Args:
+        faces: (face_count, 3) int32 host faces.
+        topology: the mesh's topology tables.
+        faces_device: (face_count,) ``wp.vec3i`` device faces.
+        edges_device: (edge_count,) ``wp.vec2i`` device edges.
+        device: Warp device.
+    """
+
+    def __init__(
+        self, faces: np.ndarray, topology: MeshTopology, faces_device: wp.array, edges_device: wp.array,
+        device: wp.Device,
+    ) -> None:
+        self.device = device
+        vertex_bits, edge_bits = ownership_bits(faces, topology)
+        self.owned_vertex_bits = wp.array(vertex_bits, dtype=wp.int32, device=device)
+        self.owned_edge_bits = wp.array(edge_bits, dtype=wp.int32, device=device)
+        self.face_edges = wp.array(topology.face_edges, dtype=wp.vec3i, device=device)
+        self.faces = faces_device
+        self.edges = edges_device
+        self._counts = [wp.empty(1, dtype=wp.int32, device=device) for _ in range(4)]
+
+    @property
+    def device_bytes(self) -> int:
+        """Bytes held on the device (ownership tables and scratch)."""
+        return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity + self.face_edges.capacity
+                + sum(a.capacity for a in self._counts))
+
+    def _scratch(self, index: int, size: int) -> wp.array:
+        if self._counts[index].shape[0] < size:
+            self._counts[index] = wp.empty(max(size, 2 * self._counts[index].shape[0]), dtype=wp.int32,
+                                           device=self.device)
+        return self._counts[index]
+
+    def extract(self, triangle_pairs: wp.array, pair_count: int, candidates: CandidatePairs) -> None:
+        """Write the feature pairs of the first ``pair_count`` triangle pairs into ``candidates``.
+
+        Reads two totals to the host (a sync point) to size the output exactly.
+        Allocates: only when ``candidates`` or the scratch arrays must grow. Capture-safe: no.
+        """
+        n = int(pair_count)
+        vf_counts = self._scratch(0, n + 1)
+        ee_counts = self._scratch(1, n + 1)
+        vf_offsets = self._scratch(2, n + 1)
+        ee_offsets = self._scratch(3, n + 1)
+        vf_counts.zero_()
+        ee_counts.zero_()
+        if n > 0:
+            wp.launch(_count_features, dim=n, device=self.device,
+                      inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
+                              self.owned_edge_bits, triangle_pairs],
+                      outputs=[vf_counts, ee_counts])
+        # Exclusive scan over n + 1 entries: the last offset is the total.
+        wp.utils.array_scan(vf_counts[: n + 1], vf_offsets[: n + 1], inclusive=False)
+        wp.utils.array_scan(ee_counts[: n + 1], ee_offsets[: n + 1], inclusive=False)
+        total_vf = int(vf_offsets[n : n + 1].numpy()[0])
+        total_ee = int(ee_offsets[n : n + 1].numpy()[0])
+        candidates.ensure(total_vf, total_ee)
+        if n > 0:
+            wp.launch(_fill_features, dim=n, device=self.device,
+                      inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
+                              self.owned_edge_bits, triangle_pairs, vf_offsets, ee_offsets],
+                      outputs=[candidates.vertex_face, candidates.edge_edge])
+        candidates.set_counts(total_vf, total_ee)

@@ -1,0 +1,465 @@
+"""Triangle-pair broad phase of PSCC: spatial hashing with the paired {CellId, NodeId} key (paper §4).
+
+Each face box is inserted in every grid cell it overlaps, keyed by the exact 64-bit
+``(CellId << 32) | uint32(NodeId)``. Sorting the entries by key lays out both tables of the paper:
+
+* ``triangleHashTable``: one row per distinct {cell, node} key (a *group*), its faces contiguous;
+* ``workLoadHashTable``: one row per non-empty cell, its groups contiguous (the cell is the high half
+  of the key, so the groups of a cell are adjacent after the sort).
+
+Faces of one group are never paired (same normal-cone-test-front node: the self-collision culling).
+Every other pair of entries of a cell is one bounding-volume (BV) test, run by one thread; a
+token-position rule emits each overlapping face pair from exactly one cell. See
+``docs/spatial-hash.md`` for the derivations.
+
+Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, all <= entry capacity):
+
+=========================  ====================  ===========================================================
+buffer                     shape, dtype          meaning
+=========================  ====================  ===========================================================
+face_cells / face_end      (face_count,) int64   cells a face's box overlaps / inclusive scan (entry ends)
+entry_key / entry_face     (2 E,) int64 / int32  {cell, node} key and face of each entry, sorted by key
+                                                 (the second half is radix-sort scratch)
+group_rank / cell_rank     (E,) int32            1-based group / cell of each sorted entry (scans of heads)
+group_start / group_end    (G,) int32            entry range of group g (triangleHashTable row g)
+group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
+cell_end                   (C,) int32            one past the last entry of cell c
+row_work / row_scan        (G,) int64            BV tests of row g = n_g x entries of later groups of its
+                                                 cell / inclusive scan (searched by the test threads)
+pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
+counts                     (2,) int64            [pairs emitted, same-node tests (always 0)]
+=========================  ====================  ===========================================================
+
+Sync points of :meth:`SpatialHash.find_pairs` (host reads of device data, each a few scalars):
+(1) scene bounds and mean box size, (2) entry count and grid size, (3) group, cell and BV test
+counts, (4) emitted pair count. Everything else stays on the device.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from pscc.collision import _spatial_hash_kernels as kernels
+from pscc.errors import CapacityError, InputError
+
+wp.set_module_options({"enable_backward": False})
+
+DEFAULT_CELL_SIZE_FACTOR: float = 2.0
+"""k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value)."""
+
+TESTS_PER_LAUNCH: int = 2**24
+"""BV tests (threads) per launch of the test kernel; bounds launch size, not memory (O(G))."""
+
+MAX_GRID_CELLS: int = 2**31 - 1
+"""Most cells of the grid: a CellId must fit in the high 31 bits of a non-negative int64 key."""
+
+MAX_ENTRIES: int = 2**30 - 1
+"""Most face-cell entries: entries are int32-indexed and the radix sort needs 2 E slots."""
+
+MAX_PAIRS: int = 2**30 - 1
+"""Most emitted face pairs: the pair buffer is int32-indexed and the radix sort needs 2 P slots."""
+
+DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
+"""Grid guard: when the entries exceed this many per face, the cell size is doubled and the
+faces are counted again (pairs are unchanged, only culling gets coarser)."""
+
+_SCENE_CHUNKS: int = 1024
+"""Threads of the scene-bounds reduction (each folds a chunk of faces)."""
+
+_GROWTH: float = 1.25
+"""Grown buffers get this factor over the exact count, so small increases do not re-grow."""
+
+
+@dataclass
+class SpatialHashStats:
+    """Counters of the last :meth:`SpatialHash.find_pairs` call.
+
+    Attributes:
+        cell_size: cell edge used (float32 value; larger than requested after coarsening).
+        grid_dims: (N_x, N_y, N_z) cells per axis.
+        entries: face-cell insertions E.
+        groups: distinct {cell, node} keys (triangleHashTable rows).
+        cells: non-empty cells (workLoadHashTable rows).
+        bv_tests: box tests run, T = sum over cells of sum_{i<j} n_i n_j.
+        triangle_pairs: face pairs emitted (unique, a < b).
+        mean_cells_per_face: E / face_count.
+        coarsenings: times the cell size was doubled by the grid guard.
+        reruns: times the test pass ran again after the pair buffer grew.
+        same_node_tests: tests that met two faces of one node (always 0; checked by the tests).
+        device_bytes: bytes held on the device, per buffer.
+    """
+
+    cell_size: float = 0.0
+    grid_dims: tuple[int, int, int] = (0, 0, 0)
+    entries: int = 0
+    groups: int = 0
+    cells: int = 0
+    bv_tests: int = 0
+    triangle_pairs: int = 0
+    mean_cells_per_face: float = 0.0
+    coarsenings: int = 0
+    reruns: int = 0
+    same_node_tests: int = 0
+    device_bytes: dict[str, int] = field(default_factory=dict)
+
+
+def _check_positive(value: float, name: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError) as exc:
+        raise InputError("argument", name, f"{value!r} is not a number", "pass a finite float > 0") from exc
+    if not math.isfinite(number) or number <= 0.0:
+        raise InputError("argument", name, f"{value!r} is not a finite number > 0", "pass a finite float > 0")
+    return number
+
+
+class SpatialHash:
+    """Spatial-hashing broad phase over face pairs with the paired {CellId, NodeId} key.
+
+    Faces with the same node id are never paired. Give every face its own id (``node_id=None``)
+    for plain spatial hashing, the normal-cone-test-front node of each face for PSCC, or one id
+    per rigid body to skip the pairs inside each body. The pair set is exact: all face pairs
+    whose closed boxes overlap and whose node ids differ, each once, sorted by (a, b). The grid
+    changes only the cost, never the result. Buffer layout in the module docstring.
+
+    Args:
+        face_count: faces m (the length of every per-face array).
+        device: Warp device (``None``: the default device).
+        cell_size_factor: k in cell size = k x mean over faces of the mean box axis length.
+        faces: (face_count,) ``wp.vec3i`` vertex ids, needed only for ``skip_adjacent``.
+        skip_adjacent: drop pairs that share a vertex (default False: such pairs can still
+            collide through their other features, so the narrow phase usually wants them).
+        max_mean_cells_per_face: grid guard; more entries than this times face_count double
+            the cell size (>= 1).
+        pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
+        tests_per_launch: BV tests per launch of the test kernel.
+
+    Raises:
+        InputError: invalid arguments.
+    """
+
+    def __init__(
+        self,
+        face_count: int,
+        device: wp.Device | str | None = None,
+        cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
+        *,
+        faces: wp.array | None = None,
+        skip_adjacent: bool = False,
+        max_mean_cells_per_face: float = DEFAULT_MAX_MEAN_CELLS_PER_FACE,
+        pair_capacity: int | None = None,
+        tests_per_launch: int = TESTS_PER_LAUNCH,
+    ) -> None:
+        if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
+            raise InputError("argument", "face_count", f"{face_count!r} is not an integer >= 0",
+                             "pass the number of faces")
+        if face_count > MAX_ENTRIES:
+            raise InputError("argument", "face_count", f"{face_count} faces exceed {MAX_ENTRIES}",
+                             "split the scene into several hashes")
+        if pair_capacity is not None and (isinstance(pair_capacity, bool) or not isinstance(pair_capacity, int)
+                                          or pair_capacity < 0):
+            raise InputError("argument", "pair_capacity", f"{pair_capacity!r} is not an integer >= 0",
+                             "pass a non-negative integer or None")
+        self.device = wp.get_device(device)
+        self.face_count = int(face_count)
+        self.cell_size_factor = _check_positive(cell_size_factor, "cell_size_factor")
+        self.max_mean_cells_per_face = _check_positive(max_mean_cells_per_face, "max_mean_cells_per_face")
+        if self.max_mean_cells_per_face < 1.0:
+            raise InputError("argument", "max_mean_cells_per_face", f"{max_mean_cells_per_face!r} < 1",
+                             "pass a value >= 1 (every face overlaps at least one cell)")
+        if isinstance(tests_per_launch, bool) or not isinstance(tests_per_launch, int) or tests_per_launch < 1:
+            raise InputError("argument", "tests_per_launch", f"{tests_per_launch!r} is not an integer >= 1",
+                             "pass a positive integer such as 2**24")
+        self.tests_per_launch = tests_per_launch
+        self.skip_adjacent = bool(skip_adjacent)
+        m = self.face_count
+        if faces is not None:
+            self._check_array(faces, "faces", wp.vec3i)
+            self.faces = faces
+        elif self.skip_adjacent:
+            raise InputError("argument", "faces", "skip_adjacent=True needs the faces' vertex ids",
+                             "pass faces=(face_count,) wp.vec3i or leave skip_adjacent False")
+        else:
+            self.faces = wp.zeros(1, dtype=wp.vec3i, device=self.device)
+
+        dev = self.device
+        chunks = max(1, min(_SCENE_CHUNKS, m))
+        self._chunk_size = max(1, -(-m // chunks))
+        self._chunk_count = max(1, -(-m // self._chunk_size))
+        self.chunk_lower = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
+        self.chunk_upper = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
+        self.chunk_length_sum = wp.empty(self._chunk_count, dtype=wp.float64, device=dev)
+        self.chunk_bad = wp.empty(self._chunk_count, dtype=wp.int32, device=dev)
+        self.scene = wp.zeros(8, dtype=wp.float64, device=dev)
+        self.face_cells = wp.empty(max(1, m), dtype=wp.int64, device=dev)
+        self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
+        self.grid_max = wp.zeros(3, dtype=wp.int32, device=dev)
+        self.entry_info = wp.zeros(4, dtype=wp.int64, device=dev)
+        self.table_info = wp.zeros(3, dtype=wp.int64, device=dev)
+        self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
+        self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
+        self._allocate_entries(max(1, 4 * m))
+        capacity = 4 * m if pair_capacity is None else pair_capacity
+        self._allocate_pairs(max(1, min(MAX_PAIRS, capacity)))
+        self._pair_count = 0
+        self.stats = SpatialHashStats()
+
+    # ------------------------------------------------------------------ buffers
+
+    def _allocate_entries(self, capacity: int) -> None:
+        dev = self.device
+        self.entry_capacity = capacity
+        self.entry_key = wp.empty(2 * capacity, dtype=wp.int64, device=dev)
+        self.entry_face = wp.empty(2 * capacity, dtype=wp.int32, device=dev)
+        self.group_rank = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.cell_rank = wp.empty(capacity, dtype=wp.int32, device=dev)
+        # group_start / cell_end first hold the head flags that are scanned into the ranks.
+        self.group_start = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.cell_end = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.row_work = wp.empty(capacity, dtype=wp.int64, device=dev)
+        self.row_scan = wp.empty(capacity, dtype=wp.int64, device=dev)
+
+    def _allocate_pairs(self, capacity: int) -> None:
+        self.pair_capacity = capacity
+        self.pairs = wp.empty(2 * capacity, dtype=wp.vec2i, device=self.device)
+        self.pair_keys = wp.empty(2 * capacity, dtype=wp.int64, device=self.device)
+
+    @property
+    def device_bytes(self) -> dict[str, int]:
+        """Bytes held on the device, per buffer name."""
+        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "face_cells",
+                 "face_end", "grid_max", "entry_info", "table_info", "counts", "own_node_id", "faces",
+                 "entry_key", "entry_face", "group_rank", "cell_rank", "group_start", "cell_end",
+                 "group_end", "group_cell", "row_work", "row_scan", "pairs", "pair_keys")
+        return {name: int(getattr(self, name).capacity) for name in names}
+
+    # ------------------------------------------------------------------ validation
+
+    def _check_array(self, value: object, name: str, dtype: type) -> None:
+        m = self.face_count
+        if not isinstance(value, wp.array):
+            raise InputError("argument", name, f"got {type(value).__name__}, not a wp.array",
+                             f"pass a ({m},) wp.array of {dtype.__name__}")
+        if value.dtype != dtype or value.ndim != 1 or value.shape[0] != m:
+            raise InputError("argument", name, f"got a {value.shape} array of {wp.types.type_repr(value.dtype)}",
+                             f"pass a ({m},) wp.array of {dtype.__name__}")
+        if value.device != self.device:
+            raise InputError("argument", name, f"array is on {value.device}, the hash on {self.device}",
+                             f"copy it to {self.device} first")
+        if not value.is_contiguous:
+            raise InputError("argument", name, "array is not contiguous", "pass a contiguous array")
+
+    # ------------------------------------------------------------------ public API
+
+    def find_pairs(
+        self,
+        face_lower: wp.array,
+        face_upper: wp.array,
+        node_id: wp.array | None = None,
+        cell_size: float | None = None,
+    ) -> tuple[wp.array, int]:
+        """All face pairs (a < b) whose closed boxes overlap and whose node ids differ.
+
+        Sync points: four host reads of a few scalars each (module docstring); the buffers grow
+        when an exact count exceeds their capacity, and the test pass then re-runs.
+
+        Args:
+            face_lower: (face_count,) ``wp.vec3`` lower box corners (length units).
+            face_upper: (face_count,) ``wp.vec3`` upper box corners, >= ``face_lower``.
+            node_id: (face_count,) ``wp.int32`` node of each face (faces of one node are never
+                paired; any int32 value); ``None`` gives every face its own node.
+            cell_size: grid cell edge (length units); ``None`` uses ``cell_size_factor`` x the
+                mean box axis length.
+
+        Returns:
+            ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
+            (a, b) and valid until the next call, and the number of pairs.
+
+        Raises:
+            InputError: wrong array, non-finite or inverted box, bad cell size.
+            CapacityError: more entries or pairs than int32 indexing allows.
+
+        Allocates: when a buffer grows. Capture-safe: no.
+        """
+        self._check_array(face_lower, "face_lower", wp.vec3)
+        self._check_array(face_upper, "face_upper", wp.vec3)
+        if node_id is None:
+            node_id = self.own_node_id
+        else:
+            self._check_array(node_id, "node_id", wp.int32)
+        if cell_size is not None:
+            cell_size = _check_positive(cell_size, "cell_size")
+        self.stats = SpatialHashStats()
+        self._pair_count = 0
+        if self.face_count < 2:
+            self.stats.device_bytes = self.device_bytes
+            if self.face_count == 1:
+                self.stats.entries = self.stats.groups = self.stats.cells = 1
+                self.stats.mean_cells_per_face = 1.0
+            return self.pairs[:0], 0
+
+        origin, extent, mean_length = self._scene_bounds(face_lower, face_upper)
+        if cell_size is None:
+            cell_size = self.cell_size_factor * mean_length
+            if not cell_size > 0.0:  # every box is degenerate: one cell per scene extent
+                cell_size = max(float(np.max(extent)), 1.0)
+        grid = kernels.GridArgs()
+        grid.origin = wp.vec3(*origin)
+        entries = self._insert_faces(face_lower, face_upper, node_id, grid, cell_size, extent)
+        self._build_tables(entries)
+        self._test_pairs(face_lower, face_upper, node_id, grid, entries)
+        self._sort_pairs()
+        self.stats.mean_cells_per_face = entries / self.face_count
+        self.stats.device_bytes = self.device_bytes
+        return self.pairs[: self._pair_count], self._pair_count
+
+    def pairs_numpy(self) -> np.ndarray:
+        """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b).
+
+        Allocates: yes (host copy). Capture-safe: no.
+        """
+        if self._pair_count == 0:
+            return np.zeros((0, 2), dtype=np.int32)
+        return self.pairs[: self._pair_count].numpy().reshape(-1, 2).astype(np.int32)
+
+    # ------------------------------------------------------------------ stages
+
+    def _scene_bounds(self, face_lower: wp.array, face_upper: wp.array) -> tuple[np.ndarray, np.ndarray, float]:
+        """Sync point 1: min corner, extent and mean box axis length (a deterministic reduction)."""
+        dev = self.device
+        wp.launch(kernels._reduce_scene_chunks, dim=self._chunk_count,
+                  inputs=[face_lower, face_upper, self._chunk_size],
+                  outputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad], device=dev)
+        wp.launch(kernels._reduce_scene_total, dim=1,
+                  inputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad,
+                          self._chunk_count],
+                  outputs=[self.scene], device=dev)
+        scene = self.scene.numpy()
+        if scene[7] > 0:
+            raise InputError("argument", "face_lower/face_upper",
+                             f"{int(scene[7])} boxes hold NaN/Inf or have lower > upper on some axis",
+                             "pass finite boxes with lower <= upper")
+        origin = scene[0:3].astype(np.float32)
+        extent = scene[3:6] - scene[0:3]
+        return origin, extent, float(scene[6]) / self.face_count
+
+    def _insert_faces(
+        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, grid: kernels.GridArgs,
+        cell_size: float, extent: np.ndarray,
+    ) -> int:
+        """Count, scan and fill the (key, face) entries, then sort them. Sync point 2.
+
+        Chooses the final cell size: doubles it while the grid or the entries are too big.
+        """
+        dev = self.device
+        m = self.face_count
+        max_entries = min(MAX_ENTRIES, max(m, int(self.max_mean_cells_per_face * m)))
+        while True:
+            cell_size = float(np.float32(cell_size))
+            estimate = [extent[k] / cell_size + 2.0 for k in range(3)]
+            if not all(math.isfinite(e) for e in estimate) or math.prod(estimate) > MAX_GRID_CELLS:
+                cell_size *= 2.0
+                self.stats.coarsenings += 1
+                continue
+            self.grid_max.zero_()
+            wp.launch(kernels._count_face_cells, dim=m, inputs=[face_lower, face_upper, grid.origin, cell_size],
+                      outputs=[self.face_cells, self.grid_max], device=dev)
+            wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
+            wp.launch(kernels._gather_entry_info, dim=1, inputs=[self.face_end, self.grid_max],
+                      outputs=[self.entry_info], device=dev)
+            info = self.entry_info.numpy()
+            entries = int(info[0])
+            dims = tuple(int(n) for n in info[1:4])
+            if entries > max_entries or math.prod(dims) > MAX_GRID_CELLS:
+                cell_size *= 2.0
+                self.stats.coarsenings += 1
+                continue
+            break
+        grid.cell_size = cell_size
+        grid.dims = wp.vec3i(*dims)
+        self.stats.cell_size = cell_size
+        self.stats.grid_dims = dims
+        self.stats.entries = entries
+        if entries > self.entry_capacity:
+            self._allocate_entries(min(MAX_ENTRIES, int(entries * _GROWTH)))
+        wp.launch(kernels._fill_entries, dim=m,
+                  inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, grid],
+                  outputs=[self.entry_key, self.entry_face], device=dev)
+        cell_bits = max(1, (math.prod(dims) - 1).bit_length())
+        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, 0, kernels.NODE_BITS + cell_bits)
+        return entries
+
+    def _build_tables(self, entries: int) -> None:
+        """Run heads -> ranks -> group and cell ranges -> row work and its scan. Sync point 3."""
+        dev = self.device
+        n = entries
+        keys = self.entry_key[:n]
+        wp.launch(kernels._mark_runs, dim=n, inputs=[keys], outputs=[self.group_start[:n], self.cell_end[:n]],
+                  device=dev)
+        wp.utils.array_scan(self.group_start[:n], self.group_rank[:n], inclusive=True)
+        wp.utils.array_scan(self.cell_end[:n], self.cell_rank[:n], inclusive=True)
+        wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n]],
+                  outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
+        wp.launch(kernels._compute_row_work, dim=n,
+                  inputs=[self.group_rank[:n], self.group_start, self.group_end, self.group_cell, self.cell_end],
+                  outputs=[self.row_work], device=dev)
+        wp.utils.array_scan(self.row_work[:n], self.row_scan[:n], inclusive=True)
+        wp.launch(kernels._gather_table_info, dim=1,
+                  inputs=[self.group_rank[:n], self.cell_rank[:n], self.row_scan[:n]],
+                  outputs=[self.table_info], device=dev)
+        info = self.table_info.numpy()
+        self.stats.groups = int(info[0])
+        self.stats.cells = int(info[1])
+        self.stats.bv_tests = int(info[2])
+
+    def _test_pairs(
+        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, grid: kernels.GridArgs, entries: int
+    ) -> None:
+        """One thread per BV test, in batches; grows the pair buffer and re-runs on overflow. Sync point 4."""
+        tables = kernels.TableArgs()
+        tables.entry_key = self.entry_key
+        tables.entry_face = self.entry_face
+        tables.group_start = self.group_start
+        tables.group_end = self.group_end
+        tables.group_cell = self.group_cell
+        tables.cell_end = self.cell_end
+        tables.row_work = self.row_work
+        tables.row_scan = self.row_scan
+        tables.group_count = self.stats.groups
+        total = self.stats.bv_tests
+        while True:
+            self.counts.zero_()
+            for first in range(0, total, self.tests_per_launch):
+                wp.launch(kernels._test_bounding_volumes, dim=min(self.tests_per_launch, total - first),
+                          inputs=[face_lower, face_upper, node_id, self.faces, int(self.skip_adjacent), grid,
+                                  tables, first, self.pair_capacity],
+                          outputs=[self.counts, self.pairs], device=self.device)
+            counts = self.counts.numpy()
+            found = int(counts[0])
+            if found <= self.pair_capacity:
+                break
+            if found > MAX_PAIRS:
+                raise CapacityError(f"spatial hash pair buffer: {found} pairs exceed {MAX_PAIRS}; "
+                                    "use smaller boxes or split the scene")
+            self._allocate_pairs(min(MAX_PAIRS, int(found * _GROWTH)))
+            self.stats.reruns += 1
+        self._pair_count = found
+        self.stats.triangle_pairs = found
+        self.stats.same_node_tests = int(counts[1])
+
+    def _sort_pairs(self) -> None:
+        """Radix-sort the emitted pairs on a * face_count + b, so the output is deterministic."""
+        count = self._pair_count
+        if count == 0:
+            return
+        m = self.face_count
+        wp.launch(kernels._compute_pair_keys, dim=count, inputs=[self.pairs, m], outputs=[self.pair_keys],
+                  device=self.device)
+        key_bits = max(1, (m * m - 1).bit_length())
+        wp.utils.radix_sort_pairs(self.pair_keys, self.pairs, count, 0, key_bits)
