@@ -24,14 +24,34 @@ import warp as wp
 from pscc._checks import as_numpy, check_nonnegative, check_points
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.brute_force import BroadPhaseBruteForce
+from pscc.collision.bvh import MaterialBvh
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.feature_pairs import FeaturePairs
+from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
+from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
 from pscc.mesh.topology import MeshTopology
 
-METHODS: tuple[str, ...] = ("brute-force",)
-"""Detection methods available through :class:`CollisionDetector`."""
+METHODS: tuple[str, ...] = ("pscc", "spatial-hash", "brute-force")
+"""Detection methods of :class:`CollisionDetector`: ``pscc`` (normal-cone test front + paired-key
+spatial hash, the default), ``spatial-hash`` (the same hash with cell-only keys: no normal-cone
+culling) and ``brute-force`` (all feature pairs; the exact reference)."""
+
+
+@wp.kernel
+def _count_self_pairs(
+    # in:
+    pairs: wp.array(dtype=wp.vec2i),
+    object_ids: wp.array(dtype=wp.int32),
+    # out:
+    self_count: wp.array(dtype=wp.int32),
+):
+    """One thread per triangle pair: count pairs whose faces belong to the same object."""
+    pair = pairs[wp.tid()]
+    if object_ids[pair[0]] == object_ids[pair[1]]:
+        wp.atomic_add(self_count, 0, 1)
 
 
 def resolve_device(device: str | None) -> wp.Device:
@@ -66,23 +86,37 @@ class CollisionResult:
 class CollisionDetector:
     """Collision detection for a triangle mesh with fixed topology (one or several objects).
 
+    The first :meth:`detect` (or :meth:`broad_phase`) call validates the faces against the
+    positions and builds every structure; later calls reuse them (the ``pscc`` test front persists
+    across calls: temporal coherence).
+
     Args:
         faces: (face_count, 3) integer vertex ids.
-        method: one of :data:`METHODS`.
+        method: one of :data:`METHODS` (default ``"pscc"``).
         object_ids: optional (face_count,) object id per face (default: one object).
         device: Warp device name (default: Warp's default device).
+        rest: optional (vertex_count, 2 or 3) material-space coordinates for the ``pscc`` BVH;
+            when omitted, the BVH is built over the first positions seen.
+        rigid_objects: object ids that are rigid obstacles: each is one front node, so its own
+            faces are never tested against each other.
+        shrink_interval: ``pscc`` shrinks its test front every this many calls.
+        cell_size_factor: k of the grid-size heuristic, cell = k x mean box axis length.
 
     Raises:
-        InputError: bad faces, object ids or method.
+        InputError: bad faces, object ids, method or device.
     """
 
     def __init__(
         self,
         faces: Any,
         *,
-        method: str = "brute-force",
+        method: str = "pscc",
         object_ids: Any = None,
         device: str | None = None,
+        rest: Any = None,
+        rigid_objects: Any = (),
+        shrink_interval: int = 5,
+        cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
     ) -> None:
         if method not in METHODS:
             raise InputError("argument", "method", f"unknown method {method!r}",
@@ -94,28 +128,48 @@ class CollisionDetector:
         if faces_np.size and faces_np.dtype.kind not in "iu":
             raise InputError("argument", "faces", f"dtype {faces_np.dtype} is not an integer type",
                              "pass vertex ids as integers")
+        if int(shrink_interval) < 1:
+            raise InputError("argument", "shrink_interval", f"{shrink_interval!r} is below 1", "pass an integer >= 1")
         self.method = method
         self.device = resolve_device(device)
         self._faces_np = np.ascontiguousarray(faces_np, dtype=np.int32)
         self._object_ids_np = None if object_ids is None else as_numpy(object_ids)
+        self._rest = None if rest is None else as_numpy(rest)
+        self._rigid_objects = frozenset(int(o) for o in rigid_objects)
+        self._shrink_interval = int(shrink_interval)
+        self._cell_size_factor = float(cell_size_factor)
         self._vertex_count: int | None = None
+        self._broad_mode: str | None = None
         self.topology: MeshTopology | None = None
+        self.front: NormalConeFront | None = None
+        self.bvh: MaterialBvh | None = None
 
     def _setup(self, vertex_count: int, positions: np.ndarray) -> None:
         """Validate the topology against the first positions and allocate device buffers."""
-        mesh = validate_mesh(positions, self._faces_np, object_ids=self._object_ids_np)
+        mesh = validate_mesh(positions, self._faces_np, object_ids=self._object_ids_np, rest=self._rest)
         self._vertex_count = vertex_count
         self.object_ids = mesh.object_ids
         self.topology = MeshTopology.from_faces(mesh.faces, vertex_count)
         device = self.device
         self._faces = wp.array(mesh.faces, dtype=wp.vec3i, device=device)
         self._edges = wp.array(self.topology.edges, dtype=wp.vec2i, device=device)
+        self._object_ids = wp.array(mesh.object_ids, dtype=wp.int32, device=device)
         self._positions_t0 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self._positions_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
+        self._self_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
-        self.broad_phase = BroadPhaseBruteForce(self.boxes, device)
-        self.narrow_phase = NarrowPhase(self._faces, self._edges, device)
+        self.narrow = NarrowPhase(self._faces, self._edges, device)
+        if self.method == "brute-force":
+            self.brute_force = BroadPhaseBruteForce(self.boxes, device)
+            return
+        self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor)
+        self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
+        if self.method == "pscc":
+            material = mesh.rest if mesh.rest is not None else mesh.vertices
+            self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
+                                         self._rigid_objects)
+            self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)
 
     def _positions(self, value: Any, name: str) -> np.ndarray:
         points = check_points(value, name, shape_tail=(3,))
@@ -124,6 +178,110 @@ class CollisionDetector:
                              f"{points.shape[0]} vertices, but this detector was set up for "
                              f"{self._vertex_count}", "pass positions of the same mesh every call")
         return points
+
+    def _inputs(self, positions: Any, positions_end: Any, thickness: float) -> tuple[np.ndarray, Any, float]:
+        x0 = self._positions(positions, "positions")
+        x1 = None if positions_end is None else self._positions(positions_end, "positions_end")
+        h = check_nonnegative(thickness, "thickness")
+        if self.topology is None:
+            self._setup(x0.shape[0], x0)
+        return x0, x1, h
+
+    def broad_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> dict[str, Any]:
+        """Find candidate feature pairs from boxes over [positions, positions_end] grown by ``thickness``.
+
+        The candidates stay in the detector, so one broad phase can serve several narrow phases
+        (the paper's Figure 8b): the CCD of a step (:meth:`narrow_phase` with both positions and
+        thickness 0) and, once penetrations are resolved, the DCD proximity query at the step's end
+        (:meth:`narrow_phase` with the end positions and the same ``thickness``). Every pair whose
+        swept boxes come within ``thickness`` is a candidate, so both narrow phases see every
+        pair they could report. For ``pscc`` the test front is updated over the whole step.
+
+        Returns:
+            Broad-phase stats: ``bv_tests``, ``triangle_pairs``, ``self_triangle_pairs``,
+            ``inter_triangle_pairs``, ``front_size``, ``candidate_pairs`` and ``seconds``.
+        """
+        x0, x1, h = self._inputs(positions, positions_end, thickness)
+        seconds: dict[str, float] = {}
+        mark = time.perf_counter()
+        self._positions_t0.assign(x0)
+        positions_t1 = self._positions_t0
+        if x1 is not None:
+            self._positions_t1.assign(x1)
+            positions_t1 = self._positions_t1
+        self.boxes.compute(self._positions_t0, positions_t1, h)
+        wp.synchronize_device(self.device)
+        seconds["boxes"] = time.perf_counter() - mark
+        stats: dict[str, Any] = {"front_size": 0}
+        if self.method == "brute-force":
+            mark = time.perf_counter()
+            while True:
+                self.candidates.reset()
+                self.brute_force.find_pairs(self.candidates)
+                if self.candidates.fits():
+                    break
+            seconds["broad_phase"] = time.perf_counter() - mark
+            m = self._faces_np.shape[0]
+            sizes = np.bincount(self.object_ids)
+            self_pairs = int((sizes * (sizes - 1) // 2).sum())
+            stats.update(bv_tests=self.brute_force.bounding_volume_tests(x0.shape[0], m, self.topology.edge_count),
+                         triangle_pairs=m * (m - 1) // 2, self_triangle_pairs=self_pairs,
+                         inter_triangle_pairs=m * (m - 1) // 2 - self_pairs)
+        else:
+            node_id = None
+            if self.method == "pscc":
+                mark = time.perf_counter()
+                x1_device = self._positions_t1 if x1 is not None else None
+                node_id = self.front.update(self._positions_t0, x1_device)
+                wp.synchronize_device(self.device)
+                seconds["front"] = time.perf_counter() - mark
+                stats["front_size"] = self.front.front_size
+                stats["front"] = dict(self.front.stats)
+            mark = time.perf_counter()
+            pairs, count = self.spatial_hash.find_pairs(self.boxes.face_lower, self.boxes.face_upper, node_id)
+            self._self_count.zero_()
+            if count > 0:
+                wp.launch(_count_self_pairs, dim=count, inputs=[pairs, self._object_ids],
+                          outputs=[self._self_count], device=self.device)
+            self_pairs = int(self._self_count.numpy()[0])
+            seconds["spatial_hash"] = time.perf_counter() - mark
+            mark = time.perf_counter()
+            self.feature_pairs.extract(pairs, count, self.candidates)
+            seconds["feature_pairs"] = time.perf_counter() - mark
+            hash_stats = self.spatial_hash.stats
+            stats.update(bv_tests=int(hash_stats.bv_tests), triangle_pairs=int(count),
+                         self_triangle_pairs=self_pairs, inter_triangle_pairs=int(count) - self_pairs,
+                         grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
+                               "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
+                               "mean_cells_per_face": float(hash_stats.mean_cells_per_face)})
+        stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
+        stats["seconds"] = seconds
+        self._broad_mode = "ccd" if x1 is not None else "dcd"
+        self._broad_stats = stats
+        return stats
+
+    def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> CollisionResult:
+        """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
+
+        The caller is responsible for the candidates covering these positions: boxes of the
+        broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it).
+        """
+        if self._broad_mode is None:
+            raise InputError("argument", "narrow_phase", "no broad phase has run", "call broad_phase() first")
+        x0, x1, h = self._inputs(positions, positions_end, thickness)
+        mark = time.perf_counter()
+        self._positions_t0.assign(x0)
+        positions_t1 = self._positions_t0
+        if x1 is not None:
+            self._positions_t1.assign(x1)
+            positions_t1 = self._positions_t1
+        self.narrow.run(self.candidates, self._positions_t0, positions_t1, h)
+        wp.synchronize_device(self.device)
+        narrow_seconds = time.perf_counter() - mark
+        mark = time.perf_counter()
+        result = self._collect(ccd=x1 is not None)
+        result.stats = {"narrow_phase": narrow_seconds, "output": time.perf_counter() - mark}
+        return result
 
     def detect(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> CollisionResult:
         """Find the colliding vertex-face and edge-edge pairs of one step.
@@ -134,64 +292,33 @@ class CollisionDetector:
             thickness: proximity distance (>= 0), in the units of the positions.
 
         Returns:
-            A :class:`CollisionResult`. ``stats`` holds ``vertex_face_pairs``, ``edge_edge_pairs``,
-            ``bv_tests``, ``candidate_pairs``, ``seconds`` (per stage: ``setup``, ``boxes``,
-            ``broad_phase``, ``narrow_phase``, ``output``, ``total``) and ``device_bytes`` (per
-            structure and ``total``).
+            A :class:`CollisionResult`. ``stats`` holds, for every method: ``bv_tests``,
+            ``triangle_pairs``, ``self_triangle_pairs``, ``inter_triangle_pairs``, ``front_size``,
+            ``candidate_pairs``, ``vertex_face_pairs``, ``edge_edge_pairs``, ``seconds`` (per stage
+            and ``total``) and ``device_bytes`` (per structure and ``total``).
 
         Raises:
             InputError: bad positions or thickness.
         """
         started = time.perf_counter()
-        seconds: dict[str, float] = {}
-        x0 = self._positions(positions, "positions")
-        x1 = None if positions_end is None else self._positions(positions_end, "positions_end")
+        x0, x1, h = self._inputs(positions, positions_end, thickness)
         if x1 is not None and x1.shape != x0.shape:
             raise InputError("argument", "positions_end", f"shape {x1.shape} differs from positions {x0.shape}",
                              "pass end positions of the same vertices")
-        h = check_nonnegative(thickness, "thickness")
-        if self.topology is None:
-            self._setup(x0.shape[0], x0)
-        seconds["setup"] = time.perf_counter() - started
-
-        mark = time.perf_counter()
-        self._positions_t0.assign(x0)
-        positions_t1 = self._positions_t0
-        if x1 is not None:
-            self._positions_t1.assign(x1)
-            positions_t1 = self._positions_t1
-        self.boxes.compute(self._positions_t0, positions_t1, h)
-        wp.synchronize_device(self.device)
-        seconds["boxes"] = time.perf_counter() - mark
-
-        mark = time.perf_counter()
-        while True:
-            self.candidates.reset()
-            self.broad_phase.find_pairs(self.candidates)
-            if self.candidates.fits():
-                break
-        seconds["broad_phase"] = time.perf_counter() - mark
-
-        mark = time.perf_counter()
-        self.narrow_phase.run(self.candidates, self._positions_t0, positions_t1, h)
-        wp.synchronize_device(self.device)
-        seconds["narrow_phase"] = time.perf_counter() - mark
-
-        mark = time.perf_counter()
-        result = self._collect(ccd=x1 is not None)
-        seconds["output"] = time.perf_counter() - mark
+        setup = time.perf_counter() - started
+        broad = self.broad_phase(x0, x1, h)
+        result = self.narrow_phase(x0, x1, h)
+        seconds = {"setup": setup, **broad["seconds"], "narrow_phase": result.stats["narrow_phase"],
+                   "output": result.stats["output"]}
         seconds["total"] = time.perf_counter() - started
-        topology = self.topology
         result.stats = {
             "method": self.method,
             "mode": "ccd" if x1 is not None else "dcd",
             "thickness": h,
             "vertex_count": int(x0.shape[0]),
             "face_count": int(self._faces_np.shape[0]),
-            "edge_count": topology.edge_count,
-            "bv_tests": self.broad_phase.bounding_volume_tests(
-                x0.shape[0], self._faces_np.shape[0], topology.edge_count),
-            "candidate_pairs": self.candidates.vertex_face_count + self.candidates.edge_edge_count,
+            "edge_count": self.topology.edge_count,
+            **{k: v for k, v in broad.items() if k != "seconds"},
             "vertex_face_pairs": int(result.vertex_face.shape[0]),
             "edge_edge_pairs": int(result.edge_edge.shape[0]),
             "seconds": seconds,
@@ -202,12 +329,18 @@ class CollisionDetector:
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``."""
         sizes = {
-            "mesh": self._faces.capacity + self._edges.capacity
+            "mesh": self._faces.capacity + self._edges.capacity + self._object_ids.capacity
             + self._positions_t0.capacity + self._positions_t1.capacity,
             "boxes": self.boxes.device_bytes,
             "candidates": self.candidates.device_bytes,
-            "narrow_phase": self.narrow_phase.device_bytes,
+            "narrow_phase": self.narrow.device_bytes,
         }
+        if self.method != "brute-force":
+            sizes["spatial_hash"] = int(sum(self.spatial_hash.device_bytes.values()))
+            sizes["feature_pairs"] = self.feature_pairs.device_bytes
+        if self.method == "pscc":
+            sizes["bvh"] = self.bvh.device_bytes
+            sizes["front"] = self.front.device_bytes
         sizes["total"] = sum(sizes.values())
         return sizes
 
@@ -217,8 +350,8 @@ class CollisionDetector:
         ee_count = self.candidates.edge_edge_count
         vf_pairs = self.candidates.vertex_face.numpy()[:vf_count].reshape(-1, 2)
         ee_pairs = self.candidates.edge_edge.numpy()[:ee_count].reshape(-1, 2)
-        vf_toi = self.narrow_phase.vertex_face_toi.numpy()[:vf_count]
-        ee_toi = self.narrow_phase.edge_edge_toi.numpy()[:ee_count]
+        vf_toi = self.narrow.vertex_face_toi.numpy()[:vf_count]
+        ee_toi = self.narrow.edge_edge_toi.numpy()[:ee_count]
         vf_keep = vf_toi <= 1.0
         ee_keep = ee_toi <= 1.0
         vertex_face = vf_pairs[vf_keep].astype(np.int32)

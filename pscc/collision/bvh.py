@@ -1,0 +1,620 @@
+"""Material-space bounding-volume hierarchy with per-node contours, for normal-cone culling (PSCC §3.2).
+
+:class:`MaterialBvh` is built once, on the host with vectorised NumPy, from the mesh topology and
+the material (rest / UV) coordinates, and uploaded to Warp arrays. The normal-cone test front
+(NCTF) runs on it every step; see ``docs/bvh.md`` for the design.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from pscc._checks import as_numpy
+from pscc.errors import InputError
+from pscc.mesh.mesh_data import MeshData
+from pscc.mesh.topology import MeshTopology
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class MaterialBvhArrays:
+    """Device copies of the :class:`MaterialBvh` arrays, passed to kernels as one argument.
+
+    Flags (``is_leaf``, ``is_rigid``, ``testable``) are int32 0/1. See :class:`MaterialBvh` for
+    the meaning of every field.
+    """
+
+    left: wp.array(dtype=wp.int32)
+    right: wp.array(dtype=wp.int32)
+    parent: wp.array(dtype=wp.int32)
+    depth: wp.array(dtype=wp.int32)
+    face_begin: wp.array(dtype=wp.int32)
+    face_end: wp.array(dtype=wp.int32)
+    is_leaf: wp.array(dtype=wp.int32)
+    is_rigid: wp.array(dtype=wp.int32)
+    object_id: wp.array(dtype=wp.int32)
+    testable: wp.array(dtype=wp.int32)
+    reference_vertex: wp.array(dtype=wp.int32)
+    contour_offsets: wp.array(dtype=wp.int32)
+    contour_vertices: wp.array(dtype=wp.int32)
+    face_order: wp.array(dtype=wp.int32)
+    face_leaf: wp.array(dtype=wp.int32)
+    level_offsets: wp.array(dtype=wp.int32)
+    level_nodes: wp.array(dtype=wp.int32)
+
+
+_DEVICE_FIELDS = tuple(MaterialBvhArrays.vars.keys())
+
+
+# --- host helpers ------------------------------------------------------------------------------
+
+
+def _range_positions(begin: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate ``arange(begin[i], end[i])`` for all i; return the positions and the i of each."""
+    lengths = (end - begin).astype(np.int64)
+    segment = np.repeat(np.arange(lengths.shape[0], dtype=np.int64), lengths)
+    starts = np.cumsum(lengths) - lengths
+    positions = np.arange(int(lengths.sum()), dtype=np.int64) - np.repeat(starts - begin, lengths)
+    return positions, segment
+
+
+def _segment_starts(lengths: np.ndarray) -> np.ndarray:
+    """Start of each segment in the concatenation of segments of the given (positive) lengths."""
+    return (np.cumsum(lengths) - lengths).astype(np.int64)
+
+
+def _face_panels(topology: MeshTopology, object_ids: np.ndarray) -> np.ndarray:
+    """Smallest face id of each face's panel (faces of one object connected through shared edges).
+
+    Vectorised union-find: every round hooks each tree root onto the smallest root it shares an
+    edge with (roots only ever point to smaller ids, so no cycles form), then compresses paths by
+    pointer jumping until every face points at its root.
+    """
+    m = object_ids.shape[0]
+    offsets = topology.edge_face_offsets.astype(np.int64)
+    slot_face = topology.edge_face_indices.astype(np.int64)
+    slot_edge = np.repeat(np.arange(offsets.shape[0] - 1, dtype=np.int64), np.diff(offsets))
+    slot_object = object_ids[slot_face]
+    order = np.lexsort((slot_object, slot_edge))  # edge-major, then object: same-object faces adjacent
+    edge_s, object_s, face_s = slot_edge[order], slot_object[order], slot_face[order]
+    linked = (edge_s[1:] == edge_s[:-1]) & (object_s[1:] == object_s[:-1])
+    u, v = face_s[:-1][linked], face_s[1:][linked]
+
+    parent = np.arange(m, dtype=np.int64)
+    while u.size:
+        root_u, root_v = parent[u], parent[v]
+        low, high = np.minimum(root_u, root_v), np.maximum(root_u, root_v)
+        active = low != high
+        if not active.any():
+            break
+        u, v, low, high = u[active], v[active], low[active], high[active]  # settled links never matter again
+        np.minimum.at(parent, high, low)
+        while True:
+            grand = parent[parent]
+            if np.array_equal(grand, parent):
+                break
+            parent = grand
+    return parent
+
+
+def _face_geometry(faces: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per-face material-space centroid, box corners and area (float64)."""
+    corners = material[faces]  # (m, 3, dim)
+    centroid = corners.mean(axis=1)
+    lower = corners.min(axis=1)
+    upper = corners.max(axis=1)
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    if material.shape[1] == 2:
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    else:
+        area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    return centroid, lower, upper, area
+
+
+_SPLIT_WINDOW = 0.25
+"""A median split may move to the widest centroid gap within ``(0.5 +- _SPLIT_WINDOW) * k`` of k faces."""
+
+
+def _split_ranges(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, centroid: np.ndarray,
+                  lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Sort each range ``face_order[begin:end]`` along its split axis and return its left child's face count.
+
+    Split axis: the longest extent of the box of the range's face centroids, measured in mean face
+    sizes along that axis (so a single row of thin faces is cut across the row, never into a
+    zig-zag of lower and upper triangles). Faces are sorted by centroid along that axis, ties by
+    the next axis. The cut goes at the median, moved to the widest gap between consecutive sorted
+    centroids within the middle half (gap weighted by 1 - distance from the median / k): on
+    structured meshes it then falls between rows of cells instead of through one, which keeps
+    both children edge-connected single-loop patches.
+    """
+    positions, segment = _range_positions(begin, end)
+    faces = face_order[positions]
+    size = (end - begin).astype(np.int64)
+    starts = _segment_starts(size)
+    centers = centroid[faces]
+    spread = np.maximum.reduceat(centers, starts, axis=0) - np.minimum.reduceat(centers, starts, axis=0)
+    face_size = np.add.reduceat(upper[faces] - lower[faces], starts, axis=0) / size[:, None]
+    axes = np.argsort(-(spread / np.maximum(face_size, np.finfo(np.float64).tiny)), axis=1, kind="stable")
+    rows = np.arange(faces.shape[0])
+    primary = centers[rows, axes[segment, 0]]
+    order = np.lexsort((centers[rows, axes[segment, 1]], primary, segment))
+    face_order[positions] = faces[order]
+
+    primary = primary[order]
+    local = positions - begin[segment]
+    count = size[segment]
+    gap = np.zeros(primary.shape[0])
+    gap[1:] = primary[1:] - primary[:-1]
+    deviation = np.abs(local - 0.5 * count) / count
+    valid = (local >= 1) & ((deviation <= _SPLIT_WINDOW) | (local == (count + 1) // 2))
+    score = np.where(valid, gap * (1.0 - deviation), -1.0)
+    best = np.maximum.reduceat(score, starts)
+    return np.minimum.reduceat(np.where(score == best[segment], local, np.iinfo(np.int64).max), starts)
+
+
+def _chain_loops(node: np.ndarray, tail: np.ndarray, head: np.ndarray, vertex_count: int,
+                 node_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Chain directed contour edges into loops, per node; keep the nodes made of exactly one loop.
+
+    A node is kept iff every contour vertex has exactly one outgoing and one incoming contour edge
+    (so the edges form disjoint cycles) and there is one cycle. The loop of a kept node starts at
+    its smallest vertex id.
+
+    Returns:
+        ``(node, rank, vertex)`` of every contour vertex of the kept nodes: the vertex at loop
+        position ``rank`` of ``node``.
+    """
+    if node.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    n = np.int64(max(vertex_count, 1))
+    key_tail = node * n + tail
+    order = np.argsort(key_tail, kind="stable")
+    node, tail, head, key_tail = node[order], tail[order], head[order], key_tail[order]
+    count = node.shape[0]
+    bad = np.zeros(node_count, dtype=bool)
+    bad[node[1:][key_tail[1:] == key_tail[:-1]]] = True  # two outgoing edges at one vertex
+    key_head = node * n + head
+    successor = np.minimum(np.searchsorted(key_tail, key_head), count - 1)
+    bad[node[key_tail[successor] != key_head]] = True  # a head that starts no edge: open chain
+    sorted_head = np.sort(key_head)
+    bad[sorted_head[1:][sorted_head[1:] == sorted_head[:-1]] // n] = True  # two incoming edges
+
+    keep = ~bad[node]
+    new_index = np.cumsum(keep) - 1
+    node, tail, successor = node[keep], tail[keep], new_index[successor[keep]]
+    count = node.shape[0]
+    if count == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    index = np.arange(count, dtype=np.int64)
+    is_start = np.ones(count, dtype=bool)
+    is_start[1:] = node[1:] != node[:-1]
+    start = np.maximum.accumulate(np.where(is_start, index, 0))
+    predecessor = np.empty(count, dtype=np.int64)
+    predecessor[successor] = index
+    # List ranking by pointer jumping towards the start: afterwards `rank` is the number of steps
+    # from the start to each edge along the loop, for the edges on the start's cycle.
+    jump = np.where(is_start, index, predecessor)
+    rank = (~is_start).astype(np.int64)
+    longest = int(np.diff(np.flatnonzero(np.append(is_start, True))).max())
+    for _ in range(max(1, math.ceil(math.log2(longest))) + 1):
+        rank = rank + rank[jump]
+        jump = jump[jump]
+    bad[node[jump != start]] = True  # an edge not on the start's cycle: several loops
+    keep = ~bad[node]
+    return node[keep], rank[keep], tail[keep]
+
+
+# --- the hierarchy -----------------------------------------------------------------------------
+
+
+class MaterialBvh:
+    """Binary BVH of a mesh's faces built in material space, with the contour of every node.
+
+    Build it with :meth:`build` (or :meth:`from_mesh`). Material coordinates are the mesh's
+    ``rest`` coordinates when it has them; otherwise the caller passes the first positions
+    (:meth:`from_mesh` does exactly that). Node ids are numbered level by level (breadth first),
+    so the nodes of one depth are a contiguous id range and, within it, ordered by ``face_begin``.
+
+    Structure: one subtree per panel (edge-connected component of the faces of one object), split
+    top-down at the median face centroid along the node's longest extent down to one face per
+    leaf (the cut may move to the widest centroid gap within the middle half of the faces, so it
+    falls between rows of cells; see :func:`_split_ranges`). The panel roots of each object, ordered
+    by their centroid along the object's widest spread, are joined by a balanced top tree, giving
+    one root per object (a forest when there are several objects). A rigid object is a single
+    leaf-like node holding all its faces. ``N`` = node count, ``m`` = face count, ``D`` = number of
+    depths, ``C`` = total contour length; ``N = 2m - 1`` when no object is rigid.
+
+    ====================  ==========  ===============================================================
+    array                 shape       meaning (int32 unless noted; -1 = none)
+    ====================  ==========  ===============================================================
+    left, right           (N,)        children; -1 for leaves and rigid nodes
+    parent                (N,)        parent; -1 for roots
+    depth                 (N,)        0 at the roots
+    face_begin, face_end  (N,)        the node covers ``face_order[face_begin:face_end]``
+    is_leaf               (N,) bool   no children (one face, or a rigid object's faces)
+    is_rigid              (N,) bool   node of a rigid object (never split, never tested)
+    object_id             (N,)        object of the node's faces
+    panel                 (N,)        panel of the node's faces; -1 above the panel roots
+    testable              (N,) bool   the contour is one closed loop of a connected patch (below)
+    reference_vertex      (N,)        interior vertex nearest the patch centroid, or -1
+    contour_offsets       (N + 1,)    CSR offsets into ``contour_vertices``
+    contour_vertices      (C,)        loop v_0 .. v_{k-1} of each testable node (edge v_{k-1} v_0 implied)
+    face_order            (m,)        permutation of the faces; every node is a range of it
+    face_leaf             (m,)        leaf (or rigid node) of each face
+    face_panel            (m,)        panel of each face (panels numbered in top-tree order)
+    level_offsets         (D + 1,)    nodes of depth d: ``level_nodes[level_offsets[d]:level_offsets[d+1]]``
+    level_nodes           (N,)        node ids by depth, deepest last (the identity, ids are BFS)
+    roots                 (R,)        root node of each object present, by ascending object id
+    object_root           (O,)        root of object id o, -1 for unused ids (O = max object id + 1)
+    ====================  ==========  ===============================================================
+
+    Contour: every mesh edge with exactly one incident face inside the node (edges shared with a
+    face outside the node count), oriented as in that face (face (a, b, c) has a->b, b->c, c->a).
+    A node is *testable* iff its faces are edge-connected, no edge of its faces has 3+ faces in the
+    whole mesh, and its contour edges form exactly one closed loop in which every contour vertex
+    has one outgoing and one incoming edge. Rigid nodes and nodes above the panel roots are never
+    testable; leaves always are (their loop is their face (v0, v1, v2), no reference vertex). The
+    loop of an internal node starts at its smallest vertex id. Non-testable nodes have an empty
+    contour range.
+
+    Device copies of these arrays (flags as int32 0/1; not ``panel``, ``face_panel``, ``roots``,
+    ``object_root``) are the fields of :attr:`arrays`, a :class:`MaterialBvhArrays` on
+    :attr:`device`. The host arrays are owned by the instance; do not modify them.
+    """
+
+    def __init__(self, host: dict[str, np.ndarray], device: Any = None) -> None:
+        """Wrap host arrays made by :meth:`build` and upload them. Use :meth:`build` instead."""
+        self.device = wp.get_device(device)
+        self.left: np.ndarray = host["left"]
+        self.right: np.ndarray = host["right"]
+        self.parent: np.ndarray = host["parent"]
+        self.depth: np.ndarray = host["depth"]
+        self.face_begin: np.ndarray = host["face_begin"]
+        self.face_end: np.ndarray = host["face_end"]
+        self.is_leaf: np.ndarray = host["is_leaf"]
+        self.is_rigid: np.ndarray = host["is_rigid"]
+        self.object_id: np.ndarray = host["object_id"]
+        self.panel: np.ndarray = host["panel"]
+        self.testable: np.ndarray = host["testable"]
+        self.reference_vertex: np.ndarray = host["reference_vertex"]
+        self.contour_offsets: np.ndarray = host["contour_offsets"]
+        self.contour_vertices: np.ndarray = host["contour_vertices"]
+        self.face_order: np.ndarray = host["face_order"]
+        self.face_leaf: np.ndarray = host["face_leaf"]
+        self.face_panel: np.ndarray = host["face_panel"]
+        self.level_offsets: np.ndarray = host["level_offsets"]
+        self.level_nodes: np.ndarray = host["level_nodes"]
+        self.roots: np.ndarray = host["roots"]
+        self.object_root: np.ndarray = host["object_root"]
+        self.arrays = MaterialBvhArrays()
+        for name in _DEVICE_FIELDS:
+            values = np.ascontiguousarray(host[name], dtype=np.int32)
+            setattr(self.arrays, name, wp.array(values, dtype=wp.int32, device=self.device))
+
+    # --- sizes ---------------------------------------------------------------------------------
+
+    @property
+    def node_count(self) -> int:
+        """Number of nodes N."""
+        return int(self.left.shape[0])
+
+    @property
+    def face_count(self) -> int:
+        """Number of faces m."""
+        return int(self.face_order.shape[0])
+
+    @property
+    def level_count(self) -> int:
+        """Number of depths D (the deepest depth is D - 1)."""
+        return int(self.level_offsets.shape[0]) - 1
+
+    @property
+    def levels(self) -> list[np.ndarray]:
+        """Node ids of each depth, roots first and deepest last (views into ``level_nodes``)."""
+        return [self.level_nodes[self.level_offsets[d]:self.level_offsets[d + 1]] for d in range(self.level_count)]
+
+    @property
+    def device_bytes(self) -> int:
+        """Bytes held on the device by :attr:`arrays`."""
+        return sum(getattr(self.arrays, name).capacity for name in _DEVICE_FIELDS)
+
+    def contour(self, node: int) -> np.ndarray:
+        """Loop vertices of ``node`` (empty when it is not testable); a view into ``contour_vertices``."""
+        return self.contour_vertices[self.contour_offsets[node]:self.contour_offsets[node + 1]]
+
+    def faces_of(self, node: int) -> np.ndarray:
+        """Faces covered by ``node``; a view into ``face_order``."""
+        return self.face_order[self.face_begin[node]:self.face_end[node]]
+
+    # --- construction --------------------------------------------------------------------------
+
+    @classmethod
+    def from_mesh(cls, mesh: MeshData, topology: MeshTopology, device: Any = None,
+                  rigid_objects: Iterable[int] = frozenset()) -> MaterialBvh:
+        """Build from a validated mesh: material coordinates are ``mesh.rest``, else ``mesh.vertices``.
+
+        Args:
+            mesh: The validated mesh.
+            topology: ``MeshTopology.from_faces(mesh.faces, mesh.vertex_count)``.
+            device: Warp device of the uploaded arrays.
+            rigid_objects: Object ids whose faces form one unsplit node each.
+
+        Returns:
+            The hierarchy.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        material = mesh.rest if mesh.rest is not None else mesh.vertices
+        return cls.build(mesh.faces, material, mesh.object_ids, topology, device, rigid_objects)
+
+    @classmethod
+    def build(cls, faces: Any, material: Any, object_ids: Any, topology: MeshTopology, device: Any = None,
+              rigid_objects: Iterable[int] = frozenset()) -> MaterialBvh:
+        """Build the hierarchy and its contours on the host, then upload it to ``device``.
+
+        Args:
+            faces: (face_count, 3) integer vertex ids (int32), at least one face.
+            material: (vertex_count, 2) or (vertex_count, 3) float material coordinates: the rest
+                / UV coordinates, or the first positions when the mesh has none.
+            object_ids: (face_count,) integer object id >= 0 of each face.
+            topology: ``MeshTopology.from_faces(faces, vertex_count)``.
+            device: Warp device of the uploaded arrays.
+            rigid_objects: Object ids whose faces form one unsplit node each.
+
+        Returns:
+            The hierarchy. Host cost: O(m log m) per depth, O(m log^2 m) in all.
+
+        Raises:
+            InputError: wrong shapes or dtypes, ids out of range, non-finite coordinates, or a
+                topology built for other faces.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        tris, coords, objects, rigid = _validate(faces, material, object_ids, topology, rigid_objects)
+        geometry = _face_geometry(tris, coords)
+        host = _build_tree(geometry, objects, topology, rigid)
+        host.update(_build_contours(tris, coords, geometry, topology, host))
+        host = {name: values.astype(np.int32) if values.dtype.kind in "iu" else values
+                for name, values in host.items()}
+        return cls(host, device)
+
+
+def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology,
+              rigid_objects: Iterable[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, frozenset[int]]:
+    """Check the public inputs of :meth:`MaterialBvh.build`; return int64 faces, float64 coordinates."""
+    tris = as_numpy(faces)
+    if tris.ndim != 2 or tris.shape[1] != 3 or tris.shape[0] == 0 or tris.dtype.kind not in "iu":
+        raise InputError("argument", "faces", f"shape {tris.shape} dtype {tris.dtype} is not a non-empty (m, 3) "
+                         "integer array", "pass the mesh's validated int32 faces")
+    coords = as_numpy(material)
+    if coords.ndim != 2 or coords.shape[1] not in (2, 3) or coords.dtype.kind not in "fiu":
+        raise InputError("argument", "material", f"shape {coords.shape} dtype {coords.dtype} is not (n, 2) or "
+                         "(n, 3) real", "pass the rest coordinates, or the first positions")
+    coords = coords.astype(np.float64)
+    if not np.all(np.isfinite(coords)):
+        raise InputError("argument", "material", "holds NaN or Inf", "pass finite material coordinates")
+    tris = tris.astype(np.int64)
+    n = coords.shape[0]
+    if tris.min() < 0 or tris.max() >= n:
+        raise InputError("argument", "faces", f"a vertex id is outside [0, {n})",
+                         "pass faces indexing the rows of material")
+    objects = as_numpy(object_ids)
+    if objects.shape != (tris.shape[0],) or objects.dtype.kind not in "iu" or (objects.size and objects.min() < 0):
+        raise InputError("argument", "object_ids", f"shape {objects.shape} dtype {objects.dtype} is not "
+                         f"({tris.shape[0]},) non-negative integers", "pass one object id >= 0 per face")
+    if topology.face_edges.shape != tris.shape or topology.vertex_count != n:
+        raise InputError("argument", "topology", f"built for {topology.face_edges.shape[0]} faces and "
+                         f"{topology.vertex_count} vertices, not {tris.shape[0]} and {n}",
+                         "pass MeshTopology.from_faces(faces, vertex_count)")
+    try:
+        rigid = frozenset(int(o) for o in rigid_objects)
+    except (TypeError, ValueError) as exc:
+        raise InputError("argument", "rigid_objects", "is not a set of integer object ids",
+                         "pass e.g. {1, 3}") from exc
+    return tris, coords, objects.astype(np.int64), rigid
+
+
+def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topology: MeshTopology,
+                rigid: frozenset[int]) -> dict[str, np.ndarray]:
+    """Top-down, level-by-level construction of the node arrays (see :class:`MaterialBvh`)."""
+    centroid, lower, upper, _ = geometry
+    m, dim = centroid.shape
+
+    # Panels, ordered by object, then by centroid along the object's widest spread of panel centroids.
+    panel_root = _face_panels(topology, object_ids)
+    panel_min_face, panel_of_face = np.unique(panel_root, return_inverse=True)
+    panel_count = panel_min_face.shape[0]
+    panel_size = np.bincount(panel_of_face, minlength=panel_count)
+    panel_center = np.stack([np.bincount(panel_of_face, weights=centroid[:, k], minlength=panel_count)
+                             for k in range(dim)], axis=1) / panel_size[:, None]
+    object_values, panel_object = np.unique(object_ids[panel_min_face], return_inverse=True)
+    spread_lo = np.full((object_values.shape[0], dim), np.inf)
+    spread_hi = np.full_like(spread_lo, -np.inf)
+    np.minimum.at(spread_lo, panel_object, panel_center)
+    np.maximum.at(spread_hi, panel_object, panel_center)
+    axis = np.argmax(spread_hi - spread_lo, axis=1)[panel_object]
+    keys = [panel_min_face] + [panel_center[:, k] for k in range(dim - 1, -1, -1)]
+    panel_sequence = np.lexsort((*keys, panel_center[np.arange(panel_count), axis], panel_object))
+    panel_rank = np.empty(panel_count, dtype=np.int64)
+    panel_rank[panel_sequence] = np.arange(panel_count)
+    face_panel = panel_rank[panel_of_face]
+    face_order = np.argsort(face_panel, kind="stable")
+    panel_begin = np.zeros(panel_count + 1, dtype=np.int64)
+    np.cumsum(panel_size[panel_sequence], out=panel_begin[1:])
+
+    # Object roots: one range of panels per object.
+    sequence_object = panel_object[panel_sequence]
+    first_panel = np.flatnonzero(np.append(True, sequence_object[1:] != sequence_object[:-1]))
+    plo = first_panel.astype(np.int64)
+    phi = np.append(first_panel[1:], panel_count).astype(np.int64)
+    root_objects = object_values[sequence_object[first_panel]]
+    is_rigid_object = np.isin(root_objects, np.fromiter(rigid, dtype=np.int64, count=len(rigid)))
+
+    seg = {"begin": panel_begin[plo], "end": panel_begin[phi], "plo": plo, "phi": phi,
+           "rigid": is_rigid_object, "object": root_objects,
+           "parent": np.full(plo.shape[0], -1, dtype=np.int64), "is_left": np.zeros(plo.shape[0], dtype=bool)}
+    levels: list[dict[str, np.ndarray]] = []
+    next_id = 0
+    while seg["begin"].shape[0]:
+        count = seg["begin"].shape[0]
+        seg["id"] = np.arange(next_id, next_id + count, dtype=np.int64)
+        next_id += count
+        levels.append(seg)
+        size = seg["end"] - seg["begin"]
+        panels = seg["phi"] - seg["plo"]
+        multi = (panels >= 2) & ~seg["rigid"]
+        median = (panels == 1) & (size >= 2) & ~seg["rigid"]
+        median_count = (size + 1) // 2
+        if median.any():
+            median_count[median] = _split_ranges(face_order, seg["begin"][median], seg["end"][median],
+                                                          centroid, lower, upper)
+        split = multi | median
+        panel_mid = (seg["plo"] + seg["phi"]) // 2
+        face_mid = np.where(multi, panel_begin[panel_mid], seg["begin"] + median_count)
+
+        def pair(left: np.ndarray, right: np.ndarray, split: np.ndarray = split) -> np.ndarray:
+            return np.stack([left[split], right[split]], axis=1).reshape(-1)
+
+        seg = {"begin": pair(seg["begin"], face_mid), "end": pair(face_mid, seg["end"]),
+               "plo": pair(seg["plo"], np.where(multi, panel_mid, seg["plo"])),
+               "phi": pair(np.where(multi, panel_mid, seg["phi"]), seg["phi"]),
+               "rigid": pair(seg["rigid"], seg["rigid"]), "object": pair(seg["object"], seg["object"]),
+               "parent": pair(seg["id"], seg["id"]),
+               "is_left": np.tile([True, False], int(split.sum()))}
+
+    def gather(name: str) -> np.ndarray:
+        return np.concatenate([level[name] for level in levels])
+
+    node_count = next_id
+    parent = gather("parent")
+    is_left = gather("is_left")
+    ids = np.arange(node_count, dtype=np.int64)
+    left = np.full(node_count, -1, dtype=np.int64)
+    right = np.full(node_count, -1, dtype=np.int64)
+    child = parent >= 0
+    left[parent[child & is_left]] = ids[child & is_left]
+    right[parent[child & ~is_left]] = ids[child & ~is_left]
+    begin, end = gather("begin"), gather("end")
+    is_leaf = left < 0
+    face_leaf = np.empty(m, dtype=np.int64)
+    positions, which = _range_positions(begin[is_leaf], end[is_leaf])
+    face_leaf[face_order[positions]] = ids[is_leaf][which]
+    plo_all, phi_all = gather("plo"), gather("phi")
+    object_root = np.full(int(object_values.max()) + 1, -1, dtype=np.int64)
+    object_root[levels[0]["object"]] = levels[0]["id"]
+    level_offsets = np.cumsum([0] + [level["id"].shape[0] for level in levels])
+    return {
+        "left": left, "right": right, "parent": parent,
+        "depth": np.repeat(np.arange(len(levels)), np.diff(level_offsets)),
+        "face_begin": begin, "face_end": end, "is_leaf": is_leaf, "is_rigid": gather("rigid"),
+        "object_id": gather("object"), "panel": np.where(phi_all - plo_all == 1, plo_all, -1),
+        "face_order": face_order, "face_leaf": face_leaf, "face_panel": face_panel,
+        "level_offsets": level_offsets, "level_nodes": ids,
+        "roots": object_root[object_root >= 0], "object_root": object_root,
+    }
+
+
+def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.ndarray, ...],
+                    topology: MeshTopology, host: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Contour loops, ``testable`` and ``reference_vertex`` of every node, one depth at a time.
+
+    At one depth the nodes cover disjoint face ranges. A half-edge of face f is on the contour of
+    f's node iff its edge has no other face, or its one other face lies in another node; edges with
+    3+ faces make a node non-testable, so they need no counting. Loops are chained per depth by
+    :func:`_chain_loops`; total work O(m log m) per depth.
+    """
+    m = faces.shape[0]
+    n = material.shape[0]
+    node_count = host["left"].shape[0]
+    face_order, begin, end = host["face_order"], host["face_begin"], host["face_end"]
+    offsets = topology.edge_face_offsets.astype(np.int64)
+    incident = topology.edge_face_indices.astype(np.int64)
+    face_edges = topology.face_edges.astype(np.int64)
+    degree = np.diff(offsets)[face_edges]
+    first = incident[offsets[face_edges]]
+    second = incident[np.minimum(offsets[face_edges] + 1, incident.shape[0] - 1)]
+    other_face = np.where(degree == 2, first + second - np.arange(m)[:, None], -1)
+    non_manifold = np.concatenate([[0], np.cumsum((degree >= 3).any(axis=1)[face_order])])
+    centroid, _, _, area = geometry
+
+    candidate = (~host["is_leaf"] & ~host["is_rigid"] & (host["panel"] >= 0)
+                 )
+    contour_length = np.where(host["is_leaf"] & ~host["is_rigid"], 3, 0).astype(np.int64)
+    reference_vertex = np.full(node_count, -1, dtype=np.int64)
+    pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    leaves = np.flatnonzero(host["is_leaf"] & ~host["is_rigid"])
+    leaf_faces = faces[face_order[begin[leaves]]]
+    pieces.append((np.repeat(leaves, 3), np.tile(np.arange(3), leaves.shape[0]), leaf_faces.reshape(-1)))
+
+    node_of_face = np.full(m, -1, dtype=np.int64)
+    level_offsets = host["level_offsets"]
+    for d in range(level_offsets.shape[0] - 1):
+        nodes = np.arange(level_offsets[d], level_offsets[d + 1])
+        nodes = nodes[candidate[nodes]]
+        if nodes.shape[0] == 0:
+            continue
+        positions, which = _range_positions(begin[nodes], end[nodes])
+        level_faces = face_order[positions]
+        face_node = nodes[which]
+        node_of_face[level_faces] = face_node
+        others = other_face[level_faces]
+        on_contour = (others < 0) | (node_of_face[np.maximum(others, 0)] != face_node[:, None])
+        node_of_face[level_faces] = -1
+        tails = faces[level_faces]
+        heads = tails[:, [1, 2, 0]]
+        half_node = np.broadcast_to(face_node[:, None], tails.shape)
+        loop_node, rank, vertex = _chain_loops(half_node[on_contour], tails[on_contour], heads[on_contour], n,
+                                               node_count)
+        if loop_node.shape[0] == 0:
+            continue
+        pieces.append((loop_node, rank, vertex))
+        good = np.zeros(node_count, dtype=bool)
+        good[loop_node] = True
+        contour_length += np.bincount(loop_node, minlength=node_count)
+
+        # Reference vertex: the interior vertex nearest the area-weighted centroid of the patch.
+        keep = good[face_node]
+        level_faces, face_node = level_faces[keep], face_node[keep]
+        good_nodes = np.flatnonzero(good)
+        starts = _segment_starts(end[good_nodes] - begin[good_nodes])
+        weight = np.add.reduceat(area[level_faces], starts)
+        weighted = np.add.reduceat(area[level_faces][:, None] * centroid[level_faces], starts, axis=0)
+        plain = np.add.reduceat(centroid[level_faces], starts, axis=0) / (end - begin)[good_nodes][:, None]
+        safe = np.where(weight > 0.0, weight, 1.0)[:, None]
+        center = np.where(weight[:, None] > 0.0, weighted / safe, plain)
+        slot = np.zeros(node_count, dtype=np.int64)
+        slot[good_nodes] = np.arange(good_nodes.shape[0])
+        corner_vertex = faces[level_faces].reshape(-1)
+        corner_node = np.repeat(face_node, 3)
+        contour_keys = np.sort(loop_node * n + vertex)
+        corner_keys = corner_node * n + corner_vertex
+        found = contour_keys[np.minimum(np.searchsorted(contour_keys, corner_keys), contour_keys.shape[0] - 1)]
+        interior = found != corner_keys
+        corner_vertex, corner_node = corner_vertex[interior], corner_node[interior]
+        distance = np.sum((material[corner_vertex] - center[slot[corner_node]]) ** 2, axis=1)
+        if corner_node.shape[0]:
+            # corner_node is non-decreasing: per node, the smallest distance, then the smallest vertex id.
+            group = np.flatnonzero(np.append(True, corner_node[1:] != corner_node[:-1]))
+            nearest = np.minimum.reduceat(distance, group)
+            size = np.diff(np.append(group, corner_node.shape[0]))
+            tied = distance == np.repeat(nearest, size)
+            big = np.iinfo(np.int64).max
+            reference_vertex[corner_node[group]] = np.minimum.reduceat(np.where(tied, corner_vertex, big), group)
+
+    contour_offsets = np.zeros(node_count + 1, dtype=np.int64)
+    np.cumsum(contour_length, out=contour_offsets[1:])
+    contour_vertices = np.empty(int(contour_offsets[-1]), dtype=np.int64)
+    for loop_node, rank, vertex in pieces:
+        contour_vertices[contour_offsets[loop_node] + rank] = vertex
+    return {"testable": contour_length > 0, "reference_vertex": reference_vertex,
+            "contour_offsets": contour_offsets, "contour_vertices": contour_vertices}
+
