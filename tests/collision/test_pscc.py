@@ -1,0 +1,181 @@
+"""The PSCC broad phase against the brute-force oracle: the correctness contract of issue 3."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pscc.collision.detector import CollisionDetector
+from pscc.collision.feature_pairs import ownership_bits
+from pscc.mesh import MeshTopology, folded_sheet, grid_sheet, twisted_sheet
+
+
+def _rows(result):
+    return {tuple(int(x) for x in r) for r in result.vertex_face}, {tuple(int(x) for x in r) for r in result.edge_edge}
+
+
+def _owners(faces: np.ndarray, vertex_count: int):
+    topology = MeshTopology.from_faces(faces, vertex_count)
+    vertex_owner = topology.vertex_face_indices[topology.vertex_face_offsets[:-1].clip(max=len(
+        topology.vertex_face_indices) - 1)]
+    edge_owner = topology.edge_face_indices[topology.edge_face_offsets[:-1]]
+    edge_index = {tuple(e): i for i, e in enumerate(topology.edges.tolist())}
+    return vertex_owner, edge_owner, edge_index
+
+
+def _check_dcd_contract(faces, x, thickness, detectors):
+    """spatial-hash == brute force; pscc is a subset whose missing pairs lie inside one front node."""
+    reference_vf, reference_ee = _rows(detectors["brute-force"].detect(x, thickness=thickness))
+    hashed_vf, hashed_ee = _rows(detectors["spatial-hash"].detect(x, thickness=thickness))
+    assert hashed_vf == reference_vf and hashed_ee == reference_ee
+    pscc = detectors["pscc"]
+    culled_vf, culled_ee = _rows(pscc.detect(x, thickness=thickness))
+    assert culled_vf <= reference_vf and culled_ee <= reference_ee
+    node_id = pscc.front.node_id.numpy()
+    vertex_owner, edge_owner, edge_index = _owners(faces, len(x))
+    for v, f in reference_vf - culled_vf:
+        assert node_id[vertex_owner[v]] == node_id[f], f"pair ({v}, {f}) culled across front nodes"
+    for a0, a1, b0, b1 in reference_ee - culled_ee:
+        ea, eb = edge_index[(a0, a1)], edge_index[(b0, b1)]
+        assert node_id[edge_owner[ea]] == node_id[edge_owner[eb]], "edge pair culled across front nodes"
+
+
+def _detectors(faces, rest=None, object_ids=None, rigid=(), shrink_interval=5):
+    return {method: CollisionDetector(faces, method=method, rest=rest, object_ids=object_ids,
+                                      rigid_objects=rigid if method == "pscc" else (), shrink_interval=shrink_interval)
+            for method in ("brute-force", "spatial-hash", "pscc")}
+
+
+@pytest.mark.parametrize("maker", ["folded", "twisted"])
+def test_ccd_equals_brute_force(maker: str) -> None:
+    mesh = folded_sheet(1500, layers=3, seed=1) if maker == "folded" else twisted_sheet(1500, turns=1.5, seed=1)
+    end = mesh.vertices_end
+    if maker == "twisted":  # shake the twisted strip hard enough that parts of it pass through others
+        scale = np.abs(mesh.vertices).max()
+        end = (end + np.random.default_rng(1).normal(0.0, 0.03 * scale, end.shape)).astype(np.float32)
+    mesh = type(mesh)(vertices=mesh.vertices, faces=mesh.faces, vertices_end=end, rest=mesh.rest,
+                      object_ids=mesh.object_ids, source=mesh.source)
+    detectors = _detectors(mesh.faces, mesh.rest)
+    reference = detectors["brute-force"].detect(mesh.vertices, mesh.vertices_end)
+    assert len(reference.vertex_face) + len(reference.edge_edge) > 0
+    for method in ("spatial-hash", "pscc"):
+        result = detectors[method].detect(mesh.vertices, mesh.vertices_end)
+        assert np.array_equal(result.vertex_face, reference.vertex_face), method
+        assert np.array_equal(result.edge_edge, reference.edge_edge), method
+        assert np.array_equal(result.vertex_face_toi, reference.vertex_face_toi), method
+    pscc_stats = detectors["pscc"].detect(mesh.vertices, mesh.vertices_end).stats
+    hash_stats = detectors["spatial-hash"].detect(mesh.vertices, mesh.vertices_end).stats
+    assert pscc_stats["triangle_pairs"] < hash_stats["triangle_pairs"]
+    assert pscc_stats["bv_tests"] < hash_stats["bv_tests"]
+    assert 1 <= pscc_stats["front_size"] <= 2 * len(mesh.faces) + 1
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), layers=st.integers(2, 4), thickness=st.sampled_from([0.0, 0.01, 0.05]))
+def test_dcd_contract_on_random_folds(seed: int, layers: int, thickness: float) -> None:
+    mesh = folded_sheet(600, layers=layers, seed=seed % 1000)
+    rng = np.random.default_rng(seed)
+    x = (mesh.vertices_end + rng.normal(0.0, 0.01, mesh.vertices.shape)).astype(np.float32)
+    _check_dcd_contract(mesh.faces, x, thickness, _detectors(mesh.faces, mesh.rest))
+
+
+@settings(max_examples=5, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amplitude=st.sampled_from([0.05, 0.3, 1.0]))
+def test_dcd_contract_on_crumpled_sheets(seed: int, amplitude: float) -> None:
+    rng = np.random.default_rng(seed)
+    vertices, faces, rest = grid_sheet(12, 12)
+    x = vertices + rng.normal(0.0, amplitude * 0.1, vertices.shape)
+    x[:, 2] += amplitude * np.sin(7 * vertices[:, 0]) * np.cos(5 * vertices[:, 1])
+    _check_dcd_contract(faces, x.astype(np.float32), 0.02, _detectors(faces, rest))
+
+
+def test_multi_object_and_rigid_obstacle() -> None:
+    cloth = folded_sheet(800, layers=2, seed=3)
+    sphere_like = folded_sheet(400, layers=3, seed=4)  # stands in for a rigid obstacle mesh
+    offset = len(cloth.vertices)
+    faces = np.concatenate([cloth.faces, sphere_like.faces + offset])
+    object_ids = np.concatenate([np.zeros(len(cloth.faces)), np.ones(len(sphere_like.faces))]).astype(np.int32)
+    rest = np.concatenate([cloth.rest, sphere_like.rest])
+    x0 = np.concatenate([cloth.vertices, sphere_like.vertices + np.float32([0.1, 0.05, 0.25])])
+    x1 = np.concatenate([cloth.vertices_end, sphere_like.vertices_end - np.float32([0.0, 0.0, 0.05])])
+    detectors = _detectors(faces, rest, object_ids, rigid=(1,))
+    reference = detectors["brute-force"].detect(x0, x1)
+    pscc = detectors["pscc"]
+    result = pscc.detect(x0, x1)
+    node_id = pscc.front.node_id.numpy()
+    rigid_nodes = np.unique(node_id[object_ids == 1])
+    assert len(rigid_nodes) == 1, "a rigid object is one front node"
+    assert not set(rigid_nodes) & set(node_id[object_ids == 0])
+    ref_vf, ref_ee = _rows(reference)
+    got_vf, got_ee = _rows(result)
+    assert got_vf <= ref_vf and got_ee <= ref_ee
+    # Everything the rigid node culls is the obstacle against itself; all cloth pairs are kept.
+    rigid_vertices = set(np.unique(faces[object_ids == 1]))
+    for v, f in ref_vf - got_vf:
+        assert v in rigid_vertices and object_ids[f] == 1
+    assert result.stats["inter_triangle_pairs"] > 0 and result.stats["self_triangle_pairs"] > 0
+    assert {(v, f) for v, f in ref_vf if object_ids[f] != 1 or v not in rigid_vertices} <= got_vf
+
+
+def test_front_sprouts_and_shrinks_over_a_fold_cycle() -> None:
+    # From the flat sheet (its rest shape) to a three-layer accordion with rounded folds and back.
+    # (A fold made of flat panels can still be a height field along a tilted direction, and PSCC
+    # then rightly certifies it whole; rounded folds cannot.)
+    mesh = folded_sheet(800, layers=3, seed=0)
+    flat = np.concatenate([mesh.rest[:, :2], np.zeros((len(mesh.rest), 1), np.float32)], axis=1)
+    faces = mesh.faces
+    det = CollisionDetector(faces, method="pscc", rest=mesh.rest, shrink_interval=1)
+    sizes = []
+    for s in [0.0, 0.5, 1.0, 1.0, 0.5, 0.0, 0.0]:
+        x = ((1 - s) * flat + s * mesh.vertices).astype(np.float32)
+        result = det.detect(x, thickness=0.0)
+        sizes.append(result.stats["front_size"])
+        node_id = det.front.node_id.numpy()
+        front = det.front.front.numpy()[: det.front.front_size]
+        # The front is a cut: every face in exactly one front node's range.
+        bvh = det.bvh
+        covered = np.zeros(len(faces), dtype=int)
+        for node in front:
+            covered[bvh.face_order[bvh.face_begin[node]:bvh.face_end[node]]] += 1
+        assert np.all(covered == 1)
+        assert set(np.unique(node_id)) == set(front.tolist())
+    assert sizes[0] == 1, "a flat sheet is one certified patch"
+    assert max(sizes) > 1, "a sheet folded onto itself needs several front nodes"
+    assert sizes[-1] == 1, "after unfolding, shrinking restores the single root node"
+
+
+def test_deterministic_and_buffers_grow() -> None:
+    mesh = folded_sheet(2000, layers=4, seed=7)
+    first = CollisionDetector(mesh.faces, rest=mesh.rest)
+    second = CollisionDetector(mesh.faces, rest=mesh.rest)
+    a = first.detect(mesh.vertices, mesh.vertices_end, thickness=0.02)
+    b = second.detect(mesh.vertices, mesh.vertices_end, thickness=0.02)
+    assert np.array_equal(a.vertex_face, b.vertex_face) and np.array_equal(a.edge_edge, b.edge_edge)
+    assert np.array_equal(a.vertex_face_toi, b.vertex_face_toi)
+    # Heavy contact: a huge thickness overflows the initial candidate capacity; results still match.
+    heavy = first.detect(mesh.vertices_end, thickness=0.2)
+    reference = CollisionDetector(mesh.faces, method="spatial-hash").detect(mesh.vertices_end, thickness=0.2)
+    assert first.candidates.capacity_vf >= first.candidates.vertex_face_count > 4 * len(mesh.faces)
+    assert _rows(heavy)[0] <= _rows(reference)[0]
+
+
+def test_stats_keys_for_every_method() -> None:
+    mesh = folded_sheet(300, layers=2, seed=2)
+    for method in ("pscc", "spatial-hash", "brute-force"):
+        stats = CollisionDetector(mesh.faces, method=method).detect(mesh.vertices, mesh.vertices_end).stats
+        for key in ("bv_tests", "triangle_pairs", "self_triangle_pairs", "inter_triangle_pairs", "front_size",
+                    "vertex_face_pairs", "edge_edge_pairs", "seconds", "device_bytes"):
+            assert key in stats, (method, key)
+        assert stats["self_triangle_pairs"] + stats["inter_triangle_pairs"] == stats["triangle_pairs"]
+
+
+def test_ownership_bits_cover_every_feature_once() -> None:
+    vertices, faces, _ = grid_sheet(4, 3)
+    topology = MeshTopology.from_faces(faces, len(vertices))
+    vertex_bits, edge_bits = ownership_bits(faces, topology)
+    owned_vertices = [faces[f][k] for f in range(len(faces)) for k in range(3) if vertex_bits[f] >> k & 1]
+    owned_edges = [topology.face_edges[f][k] for f in range(len(faces)) for k in range(3) if edge_bits[f] >> k & 1]
+    assert sorted(owned_vertices) == list(range(len(vertices)))
+    assert sorted(owned_edges) == list(range(topology.edge_count))
