@@ -28,7 +28,7 @@ def test_detect_npz_with_end_positions(tmp_path: Path, sheet, capsys) -> None:
     out = tmp_path / "pairs.npz"
     assert main(["detect", str(mesh), "--out", str(out), "--json"]) == 0
     stats = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert stats["mode"] == "ccd" and stats["method"] == "brute-force"
+    assert stats["mode"] == "ccd" and stats["method"] == "pscc"
     with np.load(out) as pairs:
         assert set(pairs.files) == {"vertex_face", "edge_edge", "vertex_face_toi", "edge_edge_toi"}
         assert pairs["vertex_face"].shape == (stats["vertex_face_pairs"], 2)

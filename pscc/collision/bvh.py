@@ -179,13 +179,15 @@ def _chain_loops(node: np.ndarray, tail: np.ndarray, head: np.ndarray, vertex_co
     order = np.argsort(key_tail, kind="stable")
     node, tail, head, key_tail = node[order], tail[order], head[order], key_tail[order]
     count = node.shape[0]
+    # successor: the edge leaving the head vertex. It is a permutation of the node's edges iff every
+    # head starts an edge and no head repeats (two edges leaving one vertex force, by counting, a
+    # head that starts no edge or a repeated head, so they need no separate check).
     bad = np.zeros(node_count, dtype=bool)
-    bad[node[1:][key_tail[1:] == key_tail[:-1]]] = True  # two outgoing edges at one vertex
     key_head = node * n + head
     successor = np.minimum(np.searchsorted(key_tail, key_head), count - 1)
     bad[node[key_tail[successor] != key_head]] = True  # a head that starts no edge: open chain
     sorted_head = np.sort(key_head)
-    bad[sorted_head[1:][sorted_head[1:] == sorted_head[:-1]] // n] = True  # two incoming edges
+    bad[sorted_head[1:][sorted_head[1:] == sorted_head[:-1]] // n] = True  # two edges entering one vertex
 
     keep = ~bad[node]
     new_index = np.cumsum(keep) - 1
@@ -547,7 +549,7 @@ def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.
     centroid, _, _, area = geometry
 
     candidate = (~host["is_leaf"] & ~host["is_rigid"] & (host["panel"] >= 0)
-                 )
+                 & (non_manifold[end] == non_manifold[begin]))
     contour_length = np.where(host["is_leaf"] & ~host["is_rigid"], 3, 0).astype(np.int64)
     reference_vertex = np.full(node_count, -1, dtype=np.int64)
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []

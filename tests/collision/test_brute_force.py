@@ -119,7 +119,7 @@ def _crumpled(seed: int, n: int = 4, amplitude: float = 0.3):
 @given(seed=st.integers(0, 2**31 - 1), thickness=st.sampled_from([0.0, 0.02]))
 def test_ccd_matches_reference_on_crumpled_sheets(seed: int, thickness: float) -> None:
     faces, x0, x1 = _crumpled(seed)
-    result = CollisionDetector(faces).detect(x0, x1, thickness=thickness)
+    result = CollisionDetector(faces, method="brute-force").detect(x0, x1, thickness=thickness)
     _check(result, _reference(faces, x0, x1, thickness, band=BAND))
     assert result.vertex_face_toi.shape == (len(result.vertex_face),)
     assert np.all((result.vertex_face_toi >= 0) & (result.vertex_face_toi <= 1))
@@ -129,7 +129,7 @@ def test_ccd_matches_reference_on_crumpled_sheets(seed: int, thickness: float) -
 @given(seed=st.integers(0, 2**31 - 1), thickness=st.sampled_from([0.0, 0.05, 0.2]))
 def test_dcd_matches_reference_on_crumpled_sheets(seed: int, thickness: float) -> None:
     faces, x0, _ = _crumpled(seed, amplitude=1.0)
-    result = CollisionDetector(faces).detect(x0, thickness=thickness)
+    result = CollisionDetector(faces, method="brute-force").detect(x0, thickness=thickness)
     assert result.vertex_face_toi is None and result.edge_edge_toi is None
     _check(result, _reference(faces, x0, x0, thickness, band=BAND))
 
@@ -142,7 +142,7 @@ def test_multi_object_ccd(device: str) -> None:
     object_ids = np.concatenate([np.zeros(len(a.faces)), np.ones(len(b.faces))]).astype(np.int32)
     x0 = np.concatenate([a.vertices, b.vertices + np.float32([0.05, 0.05, 0.3])])
     x1 = np.concatenate([a.vertices_end, b.vertices_end - np.float32([0.0, 0.0, 0.1])])
-    det = CollisionDetector(faces, object_ids=object_ids, device=device)
+    det = CollisionDetector(faces, method="brute-force", object_ids=object_ids, device=device)
     result = det.detect(x0, x1)
     _check(result, _reference(faces, x0, x1, 0.0, band=BAND))
     inter = [r for r in result.vertex_face if (r[0] < offset) != (faces[r[1]][0] < offset)]
@@ -156,14 +156,14 @@ def test_degenerate_faces_and_non_manifold_edges(device: str) -> None:
     faces = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4], [1, 5, 7]], np.int32)
     x1 = x0.copy()
     x1[6] = [0.5, 0.2, -0.5]
-    result = CollisionDetector(faces, device=device).detect(x0, x1)
+    result = CollisionDetector(faces, method="brute-force", device=device).detect(x0, x1)
     _check(result, _reference(faces, x0, x1, 0.0, band=BAND))
     assert (6, 0) in {tuple(r) for r in result.vertex_face}
 
 
 def test_repeated_calls_are_deterministic(device: str) -> None:
     sheet = folded_sheet(400, layers=3, seed=3)
-    det = CollisionDetector(sheet.faces, device=device)
+    det = CollisionDetector(sheet.faces, method="brute-force", device=device)
     first = det.detect(sheet.vertices, sheet.vertices_end)
     second = det.detect(sheet.vertices, sheet.vertices_end)
     assert np.array_equal(first.vertex_face, second.vertex_face)
@@ -177,7 +177,7 @@ def test_repeated_calls_are_deterministic(device: str) -> None:
 def test_candidate_buffers_grow(device: str) -> None:
     # A thick DCD on a crumpled sheet overflows the initial candidate capacity (4 per face).
     faces, x0, _ = _crumpled(5, n=6, amplitude=1.0)
-    det = CollisionDetector(faces, device=device)
+    det = CollisionDetector(faces, method="brute-force", device=device)
     result = det.detect(x0, thickness=0.5)
     assert det.candidates.vertex_face_count > 4 * len(faces)
     _check(result, _reference(faces, x0, x0, 0.5, band=BAND))
@@ -185,7 +185,7 @@ def test_candidate_buffers_grow(device: str) -> None:
 
 def test_rows_are_canonical(device: str) -> None:
     sheet = folded_sheet(300, layers=3, seed=4)
-    result = CollisionDetector(sheet.faces, device=device).detect(sheet.vertices, sheet.vertices_end)
+    result = CollisionDetector(sheet.faces, method="brute-force", device=device).detect(sheet.vertices, sheet.vertices_end)
     ee = result.edge_edge
     assert np.all(ee[:, 0] < ee[:, 1]) and np.all(ee[:, 2] < ee[:, 3])
     assert np.all((ee[:, 0] < ee[:, 2]) | ((ee[:, 0] == ee[:, 2]) & (ee[:, 1] < ee[:, 3])))
