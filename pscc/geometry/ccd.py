@@ -133,6 +133,23 @@ def _best_half_gap(
 
 
 @wp.func
+def _root_gap_squared(q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3,
+                      err: wp.vec3) -> float:
+    """Squared gap of the whole (t, u, v) in [0, 1]^3 box, evaluated exactly as the search does."""
+    qa = _lerp(q0, q1, 0.0)
+    qb = _lerp(q0, q1, 1.0)
+    e1a = _lerp(e10, e11, 0.0)
+    e1b = _lerp(e10, e11, 1.0)
+    e2a = _lerp(e20, e21, 0.0)
+    e2b = _lerp(e20, e21, 1.0)
+    lo = wp.min(wp.min(qa, qa + e1a), wp.min(qa + e2a, qa + e1a + e2a))
+    hi = wp.max(wp.max(qa, qa + e1a), wp.max(qa + e2a, qa + e1a + e2a))
+    lo = wp.min(lo, wp.min(wp.min(qb, qb + e1b), wp.min(qb + e2b, qb + e1b + e2b)))
+    hi = wp.max(hi, wp.max(wp.max(qb, qb + e1b), wp.max(qb + e2b, qb + e1b + e2b)))
+    return _gap_squared(lo, hi, err)
+
+
+@wp.func
 def _ccd_search(
     q0: wp.vec3,
     e10: wp.vec3,
@@ -151,6 +168,10 @@ def _ccd_search(
     q, e1, e2 are given at t = 0 and t = 1 and are evaluated at t by the exact expressions the
     rounding bound assumes. ``triangle_domain`` = 1 restricts (u, v) to u + v <= 1.
     """
+    ms_sq = minimum_distance * minimum_distance * (1.0 + params.comparison_margin)
+    # Most candidate pairs are excluded by the whole box already: test it before building the stack.
+    if _root_gap_squared(q0, e10, e20, q1, e11, e21, err) * (1.0 - params.comparison_margin) > ms_sq:
+        return 2.0
     stack_t0 = _stack_vector()
     stack_t1 = _stack_vector()
     stack_u0 = _stack_vector()
@@ -166,7 +187,6 @@ def _ccd_search(
     count = int(1)
     best = float(2.0)
     boxes = int(0)
-    ms_sq = minimum_distance * minimum_distance * (1.0 + params.comparison_margin)
     tolerance = params.codomain_tolerance * scale
     min_width = params.min_parameter_width
 

@@ -185,7 +185,8 @@ def test_candidate_buffers_grow(device: str) -> None:
 
 def test_rows_are_canonical(device: str) -> None:
     sheet = folded_sheet(300, layers=3, seed=4)
-    result = CollisionDetector(sheet.faces, method="brute-force", device=device).detect(sheet.vertices, sheet.vertices_end)
+    detector = CollisionDetector(sheet.faces, method="brute-force", device=device)
+    result = detector.detect(sheet.vertices, sheet.vertices_end)
     ee = result.edge_edge
     assert np.all(ee[:, 0] < ee[:, 1]) and np.all(ee[:, 2] < ee[:, 3])
     assert np.all((ee[:, 0] < ee[:, 2]) | ((ee[:, 0] == ee[:, 2]) & (ee[:, 1] < ee[:, 3])))
