@@ -6,6 +6,8 @@ Sections:
    queries per second on this machine's device.
 2. CCD throughput on random trajectories (generic, mostly separated queries).
 3. The brute-force detector on folded three-layer cloth at 1K, 4K and 16K triangles (CCD and DCD).
+4. The broad phase: pscc against spatial hashing and Newton at 50K and 200K triangles
+   (:mod:`pscc.bench.broad_phase`).
 
 Timings are the median of repeats after a warm-up run that compiles and loads the kernels.
 """
@@ -24,6 +26,7 @@ import numpy as np
 import warp as wp
 from tqdm import tqdm
 
+from pscc.bench import broad_phase
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
 from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
@@ -185,6 +188,8 @@ def write_report(results: dict[str, Any], out: Path) -> None:
     if _plot_brute_force(results["brute_force"], plot):
         lines += ["", f"![brute-force time per call]({plot.relative_to(out.parent).as_posix()})"]
     lines.append("")
+    if results.get("broad_phase"):
+        lines += broad_phase.report(results["broad_phase"])
     out.write_text("\n".join(lines))
 
 
@@ -196,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed repeats per measurement")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 4000, 16000],
                         help="triangle counts for the brute-force detector")
+    parser.add_argument("--broad-phase-sizes", type=int, nargs="*", default=[50000, 200000],
+                        help="triangle counts for the broad-phase comparison (none to skip it)")
+    parser.add_argument("--no-newton", action="store_true", help="skip Newton in the broad-phase comparison")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
@@ -210,6 +218,9 @@ def main(argv: list[str] | None = None) -> int:
     results["query_sets"] = bench_query_sets(device.alias, args.repeats)
     results["random_queries"] = bench_random_queries(device.alias, 100_000, args.repeats)
     results["brute_force"] = bench_brute_force(device.alias, args.sizes, args.repeats)
+    if args.broad_phase_sizes:
+        results["broad_phase"] = broad_phase.run(args.broad_phase_sizes, device.alias, args.repeats,
+                                                 with_newton=not args.no_newton)
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(results, indent=2))
     write_report(results, out)
