@@ -50,7 +50,9 @@ def _print_summary(stats: dict[str, Any]) -> None:
     seconds = stats["seconds"]
     print(f"mesh: {stats['vertex_count']} vertices, {stats['face_count']} faces, {stats['edge_count']} edges")
     print(f"mode: {stats['mode']} (thickness {stats['thickness']:g}), method: {stats['method']}")
-    print(f"bounding-volume tests: {stats['bv_tests']:,}; candidate feature pairs: {stats['candidate_pairs']:,}")
+    print(f"bounding-volume tests: {stats['bv_tests']:,}; triangle pairs: {stats['triangle_pairs']:,} "
+          f"({stats['self_triangle_pairs']:,} self, {stats['inter_triangle_pairs']:,} inter); "
+          f"front nodes: {stats['front_size']:,}; candidate feature pairs: {stats['candidate_pairs']:,}")
     print(f"colliding pairs: {stats['vertex_face_pairs']:,} vertex-face, {stats['edge_edge_pairs']:,} edge-edge")
     stages = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in seconds.items() if k != "total")
     print(f"time: {seconds['total']:.3f} s ({stages})")
@@ -68,7 +70,8 @@ def _detect(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     if out is not None and out.suffix.lower() != ".npz":
         raise InputError(str(out), "--out", "the output must be an .npz file", "end the path in .npz")
-    detector = CollisionDetector(mesh.faces, method=args.method, object_ids=mesh.object_ids, device=args.device)
+    detector = CollisionDetector(mesh.faces, method=args.method, object_ids=mesh.object_ids, rest=mesh.rest,
+                                 device=args.device)
     result = detector.detect(mesh.vertices, positions_end, thickness=args.thickness)
     if out is not None:
         _write_npz_atomic(out, _result_arrays(result))
@@ -89,7 +92,7 @@ def _demo(args: argparse.Namespace) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     print(f"Generating a three-layer folded cloth of about {args.triangles:,} triangles ...")
     mesh = folded_sheet(args.triangles, layers=3, seed=0)
-    detector = CollisionDetector(mesh.faces, method=args.method, device=args.device)
+    detector = CollisionDetector(mesh.faces, method=args.method, rest=mesh.rest, device=args.device)
     print("Continuous collision detection over one step (start -> end positions):")
     ccd = detector.detect(mesh.vertices, mesh.vertices_end, thickness=0.0)
     _print_summary(ccd.stats)
