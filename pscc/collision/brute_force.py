@@ -1,9 +1,10 @@
 """All-pairs broad phase: the exact reference every culling method is tested against.
 
-Every vertex is box-tested against every face, and every edge against every other edge, skipping
-only pairs that share a vertex. Work is split into launches of bounded size: thread (row, block)
-tests one vertex (or edge) against a block of ``BLOCK`` faces (or edges). Nothing is culled, so
-its candidates are a superset of every colliding pair; its cost is Θ(V F + E²).
+Every vertex of the surface (isolated vertices, used by no face, take no part) is box-tested
+against every face, and every edge against every other edge, skipping only pairs that share a
+vertex. Work is split into launches of bounded size: thread (row, block) tests one vertex (or
+edge) against a block of ``BLOCK`` faces (or edges). Nothing is culled, so its candidates are a
+superset of every colliding pair; its cost is Θ(V F + E²).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ TESTS_PER_LAUNCH: int = 2**26
 def _vertex_face_pairs(
     # in:
     faces: wp.array(dtype=wp.vec3i),
+    vertex_used: wp.array(dtype=wp.int32),
     vertex_lower: wp.array(dtype=wp.vec3),
     vertex_upper: wp.array(dtype=wp.vec3),
     face_lower: wp.array(dtype=wp.vec3),
@@ -39,6 +41,8 @@ def _vertex_face_pairs(
     """One thread per (vertex, block of BLOCK faces)."""
     row, block = wp.tid()
     v = first_vertex + row
+    if vertex_used[v] == 0:
+        return  # a vertex of no face is not part of any surface
     lo = vertex_lower[v]
     hi = vertex_upper[v]
     face_count = faces.shape[0]
@@ -89,11 +93,13 @@ class BroadPhaseBruteForce:
 
     Args:
         boxes: the primitive boxes it reads (filled by the caller each call).
+        vertex_used: (vertex_count,) int32, 1 for vertices of at least one face.
         device: Warp device.
     """
 
-    def __init__(self, boxes: PrimitiveBoxes, device: wp.Device) -> None:
+    def __init__(self, boxes: PrimitiveBoxes, vertex_used: wp.array, device: wp.Device) -> None:
         self.boxes = boxes
+        self.vertex_used = vertex_used
         self.device = device
 
     def bounding_volume_tests(self, vertex_count: int, face_count: int, edge_count: int) -> int:
@@ -116,7 +122,7 @@ class BroadPhaseBruteForce:
         for first in range(0, vertex_count, rows):
             count = min(rows, vertex_count - first)
             wp.launch(_vertex_face_pairs, dim=(count, face_blocks),
-                      inputs=[boxes.faces, boxes.vertex_lower, boxes.vertex_upper,
+                      inputs=[boxes.faces, self.vertex_used, boxes.vertex_lower, boxes.vertex_upper,
                               boxes.face_lower, boxes.face_upper, first],
                       outputs=[candidates.counts, candidates.vertex_face], device=self.device)
         edge_blocks = (edge_count + BLOCK - 1) // BLOCK

@@ -2,14 +2,15 @@
 
 A detector is built once per mesh topology and called once per step::
 
-    det = pscc.CollisionDetector(faces, method="brute-force", object_ids=None, device=None)
+    det = pscc.CollisionDetector(faces, method="pscc", object_ids=None, device=None)
     res = det.detect(positions, positions_end=None, thickness=0.0)
 
 Discrete detection (DCD, ``positions_end=None``) reports the pairs closer than ``thickness``.
 Continuous detection (CCD) reports the pairs that come within ``thickness`` (0 = touching) at some
 time of the step, with a time of impact that is never later than the true one. Pairs that share a
-vertex are never reported. Both are conservative: a true pair is never missed; a reported pair may
-be a near miss within the tolerance band documented in :mod:`pscc.tolerances` (``docs/ccd.md``).
+vertex are never reported, and isolated vertices (used by no face) take no part. Both are
+conservative: a true pair is never missed; a reported pair may be a near miss within the
+tolerance band documented in :mod:`pscc.tolerances` (``docs/ccd.md``).
 """
 
 from __future__ import annotations
@@ -161,7 +162,9 @@ class CollisionDetector:
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
         if self.method == "brute-force":
-            self.brute_force = BroadPhaseBruteForce(self.boxes, device)
+            used = (np.diff(self.topology.vertex_face_offsets) > 0).astype(np.int32)
+            self._vertex_used = wp.array(used, dtype=wp.int32, device=device)
+            self.brute_force = BroadPhaseBruteForce(self.boxes, self._vertex_used, device)
             return
         self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor)
         self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)

@@ -68,7 +68,10 @@ def _reference(faces, x0, x1, thickness, band):
         return may_hit(kind, points0, points1)
 
     must_vf, may_vf, must_ee, may_ee = set(), set(), set(), set()
+    used = set(np.unique(faces).tolist())
     for v in range(vertex_count):
+        if v not in used:
+            continue  # isolated vertices take no part
         for f, tri in enumerate(faces):
             if v in tri:
                 continue
@@ -150,15 +153,18 @@ def test_multi_object_ccd(device: str) -> None:
 
 
 def test_degenerate_faces_and_non_manifold_edges(device: str) -> None:
-    # Three faces share edge (0, 1); face 3 has zero area; a falling vertex 6 crosses all of them.
+    # Three faces share edge (0, 1); face 3 has zero area; a small falling triangle (6, 8, 9)
+    # crosses all of them. Vertex 10 is isolated (used by no face) and takes no part.
     x0 = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1], [2, 0, 0],
-                   [0.5, 0.2, 0.5], [3, 0, 0]], np.float32)
-    faces = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4], [1, 5, 7]], np.int32)
+                   [0.5, 0.2, 0.5], [3, 0, 0], [0.6, 0.25, 0.5], [0.55, 0.3, 0.5], [0.4, 0.4, 0.5]], np.float32)
+    faces = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4], [1, 5, 7], [6, 8, 9]], np.int32)
     x1 = x0.copy()
-    x1[6] = [0.5, 0.2, -0.5]
+    x1[[6, 8, 9, 10], 2] = -0.5
     result = CollisionDetector(faces, method="brute-force", device=device).detect(x0, x1)
     _check(result, _reference(faces, x0, x1, 0.0, band=BAND))
-    assert (6, 0) in {tuple(r) for r in result.vertex_face}
+    pairs = {tuple(r) for r in result.vertex_face}
+    assert (6, 0) in pairs
+    assert not any(v == 10 for v, _ in pairs)
 
 
 def test_repeated_calls_are_deterministic(device: str) -> None:
