@@ -20,6 +20,16 @@ plus 2 u M for the rounding of the translation itself: 65 u M. 80 leaves a margi
 second-order terms and for M being read off rounded values. Dimensionless.
 """
 
+COPLANARITY_ROUNDING_FACTOR: float = 16.0
+"""Multiple of ``u`` times its magnitude companion beyond which a Bernstein coefficient of the
+coplanarity cubic has a trusted sign (the filter that skips the CCD search for pairs that never
+become coplanar; used when the minimum distance is 0).
+
+Each coefficient is at most 10 roundings (translation, differences, cross products, dot products,
+one sum) away from the exact float32 input, so its error is below gamma_10 ~ 10 u times the same
+expression evaluated with absolute values. Dimensionless.
+"""
+
 CCD_CODOMAIN_TOLERANCE: float = 1.0e-5
 """Relative size (times the query's local scale M) below which a CCD box is not split further.
 

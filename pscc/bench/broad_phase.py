@@ -40,11 +40,12 @@ def _twist(points: np.ndarray, turns: float) -> np.ndarray:
 
 
 def twisted_layers(triangles: int) -> MeshData:
-    """The three-layer folded cloth twisted about its long axis by half a turn, twisting further
-    (and pressing its layers together) over the step."""
+    """The three-layer folded cloth twisted about its long axis by half a turn, twisting a little
+    further (0.5 % of a turn, about one step of a twisting animation) while its layers are pressed
+    together over the step."""
     mesh = folded_sheet(triangles, layers=3, seed=0)
     return MeshData(vertices=_twist(mesh.vertices, 0.5), faces=mesh.faces,
-                    vertices_end=_twist(mesh.vertices_end, 0.55), rest=mesh.rest, object_ids=mesh.object_ids,
+                    vertices_end=_twist(mesh.vertices_end, 0.505), rest=mesh.rest, object_ids=mesh.object_ids,
                     source=f"twisted_layers({triangles})")
 
 

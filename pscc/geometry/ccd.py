@@ -58,6 +58,7 @@ class CcdParameters:
     min_parameter_width: wp.float32
     comparison_margin: wp.float32
     max_boxes: wp.int32
+    coplanarity_factor: wp.float32
 
 
 def ccd_parameters() -> CcdParameters:
@@ -68,6 +69,7 @@ def ccd_parameters() -> CcdParameters:
     params.min_parameter_width = tolerances.CCD_MIN_PARAMETER_WIDTH
     params.comparison_margin = tolerances.DISTANCE_COMPARISON_MARGIN
     params.max_boxes = tolerances.CCD_MAX_BOXES
+    params.coplanarity_factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
     return params
 
 
@@ -130,6 +132,67 @@ def _best_half_gap(
     high_lo = wp.min(mid_lo, wp.min(wp.min(a1, b1), wp.min(c1, d1)))
     high_hi = wp.max(mid_hi, wp.max(wp.max(a1, b1), wp.max(c1, d1)))
     return wp.max(_gap_squared(low_lo, low_hi, err), _gap_squared(high_lo, high_hi, err))
+
+
+@wp.func
+def _abs_cross(a: wp.vec3, b: wp.vec3) -> wp.vec3:
+    """Componentwise |a_y b_z| + |a_z b_y| etc.: the magnitude companion of a cross product."""
+    return wp.vec3(
+        wp.abs(a[1] * b[2]) + wp.abs(a[2] * b[1]),
+        wp.abs(a[2] * b[0]) + wp.abs(a[0] * b[2]),
+        wp.abs(a[0] * b[1]) + wp.abs(a[1] * b[0]),
+    )
+
+
+@wp.func
+def _abs_dot(a: wp.vec3, b: wp.vec3) -> float:
+    return wp.abs(a[0] * b[0]) + wp.abs(a[1] * b[1]) + wp.abs(a[2] * b[2])
+
+
+@wp.func
+def _strict_sign(value: float, magnitude: float, factor: float) -> float:
+    """Sign of ``value`` when it exceeds its rounding bound ``factor * magnitude``, else 0."""
+    bound = factor * magnitude
+    if value > bound:
+        return 1.0
+    if value < -bound:
+        return -1.0
+    return 0.0
+
+
+@wp.func
+def _never_coplanar(
+    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, factor: float
+) -> bool:
+    """True when the four points provably never become coplanar during the step.
+
+    The coplanarity function f(t) = (e1(t) x e2(t)) . q(t) is a cubic with Bernstein coefficients
+    k0 = n0.q0, 3 k1 = 2 nX.q0 + n0.q1, 3 k2 = 2 nX.q1 + n1.q0, k3 = n1.q1 (nX the middle control
+    normal). When all four have one strict sign, f never vanishes on [0, 1], so the vertex never
+    touches the face (the edges never touch). Each value is trusted only beyond
+    ``factor x`` its magnitude companion (the same sums of products with absolute values): at most
+    10 roundings separate each value from the exact float32 input, so the error is below
+    gamma_10 = 10 u times that companion; ``factor`` = 16 u covers it (see ``docs/ccd.md``).
+    """
+    de1 = e11 - e10
+    de2 = e21 - e20
+    n0 = wp.cross(e10, e20)
+    n1 = wp.cross(e11, e21)
+    nx = 0.5 * ((n0 + n1) - wp.cross(de1, de2))
+    m0 = _abs_cross(e10, e20)
+    m1 = _abs_cross(e11, e21)
+    mx = 0.5 * ((m0 + m1) + _abs_cross(de1, de2))
+    s0 = _strict_sign(wp.dot(n0, q0), _abs_dot(m0, q0), factor)
+    if s0 == 0.0:
+        return False
+    s3 = _strict_sign(wp.dot(n1, q1), _abs_dot(m1, q1), factor)
+    if s3 != s0:
+        return False
+    s1 = _strict_sign(2.0 * wp.dot(nx, q0) + wp.dot(n0, q1), 2.0 * _abs_dot(mx, q0) + _abs_dot(m0, q1), factor)
+    if s1 != s0:
+        return False
+    s2 = _strict_sign(2.0 * wp.dot(nx, q1) + wp.dot(n1, q0), 2.0 * _abs_dot(mx, q1) + _abs_dot(m1, q0), factor)
+    return s2 == s0
 
 
 @wp.func
@@ -352,10 +415,16 @@ def vertex_face_ccd_toi(
     m = _abs_max(m, yc1)
     err = _query_error(m, extra_error, params)
     scale = wp.max(m[0], wp.max(m[1], m[2]))
-    return _ccd_search(
-        yp0 - ya0, ya0 - yb0, ya0 - yc0, yp1 - ya1, ya1 - yb1, ya1 - yc1,
-        1, err, scale, minimum_distance, params,
-    )
+    q0 = yp0 - ya0
+    e10 = ya0 - yb0
+    e20 = ya0 - yc0
+    q1 = yp1 - ya1
+    e11 = ya1 - yb1
+    e21 = ya1 - yc1
+    if minimum_distance == 0.0 and extra_error == 0.0:
+        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
+            return 2.0
+    return _ccd_search(q0, e10, e20, q1, e11, e21, 1, err, scale, minimum_distance, params)
 
 
 @wp.func
@@ -397,10 +466,16 @@ def edge_edge_ccd_toi(
     m = _abs_max(m, yb11)
     err = _query_error(m, extra_error, params)
     scale = wp.max(m[0], wp.max(m[1], m[2]))
-    return _ccd_search(
-        ya00 - yb00, ya10 - ya00, yb00 - yb10, ya01 - yb01, ya11 - ya01, yb01 - yb11,
-        0, err, scale, minimum_distance, params,
-    )
+    q0 = ya00 - yb00
+    e10 = ya10 - ya00
+    e20 = yb00 - yb10
+    q1 = ya01 - yb01
+    e11 = ya11 - ya01
+    e21 = yb01 - yb11
+    if minimum_distance == 0.0 and extra_error == 0.0:
+        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
+            return 2.0
+    return _ccd_search(q0, e10, e20, q1, e11, e21, 0, err, scale, minimum_distance, params)
 
 
 @wp.kernel
