@@ -48,7 +48,7 @@ from pscc.errors import CapacityError, InputError
 
 wp.set_module_options({"enable_backward": False})
 
-DEFAULT_CELL_SIZE_FACTOR: float = 2.0
+DEFAULT_CELL_SIZE_FACTOR: float = 1.5
 """k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value)."""
 
 TESTS_PER_LAUNCH: int = 2**24
