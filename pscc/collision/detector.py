@@ -30,6 +30,7 @@ from pscc.collision.candidates import CandidatePairs
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
+from pscc.collision.pair_filter import TrianglePairFilter
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
@@ -168,6 +169,7 @@ class CollisionDetector:
             return
         self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor)
         self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
+        self.pair_filter = TrianglePairFilter(self._faces, device)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
@@ -201,7 +203,8 @@ class CollisionDetector:
         pair they could report. For ``pscc`` the test front is updated over the whole step.
 
         Returns:
-            Broad-phase stats: ``bv_tests``, ``triangle_pairs``, ``self_triangle_pairs``,
+            Broad-phase stats: ``bv_tests``, ``box_pairs`` (hashed methods: triangle pairs whose boxes
+            overlap), ``triangle_pairs`` (after the supporting-plane test), ``self_triangle_pairs``,
             ``inter_triangle_pairs``, ``front_size``, ``candidate_pairs`` and ``seconds``.
         """
         x0, x1, h = self._inputs(positions, positions_end, thickness)
@@ -241,18 +244,22 @@ class CollisionDetector:
                 stats["front_size"] = self.front.front_size
                 stats["front"] = dict(self.front.stats)
             mark = time.perf_counter()
-            pairs, count = self.spatial_hash.find_pairs(self.boxes.face_lower, self.boxes.face_upper, node_id)
+            pairs, box_pairs = self.spatial_hash.find_pairs(self.boxes.face_lower, self.boxes.face_upper, node_id)
+            seconds["spatial_hash"] = time.perf_counter() - mark
+            mark = time.perf_counter()
+            x1_device = self._positions_t1 if x1 is not None else None
+            pairs, count = self.pair_filter.filter(pairs, box_pairs, self._positions_t0, x1_device, h)
             self._self_count.zero_()
             if count > 0:
                 wp.launch(_count_self_pairs, dim=count, inputs=[pairs, self._object_ids],
                           outputs=[self._self_count], device=self.device)
             self_pairs = int(self._self_count.numpy()[0])
-            seconds["spatial_hash"] = time.perf_counter() - mark
+            seconds["plane_filter"] = time.perf_counter() - mark
             mark = time.perf_counter()
             self.feature_pairs.extract(pairs, count, self.candidates)
             seconds["feature_pairs"] = time.perf_counter() - mark
             hash_stats = self.spatial_hash.stats
-            stats.update(bv_tests=int(hash_stats.bv_tests), triangle_pairs=int(count),
+            stats.update(bv_tests=int(hash_stats.bv_tests), box_pairs=int(box_pairs), triangle_pairs=int(count),
                          self_triangle_pairs=self_pairs, inter_triangle_pairs=int(count) - self_pairs,
                          grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
@@ -341,6 +348,7 @@ class CollisionDetector:
         if self.method != "brute-force":
             sizes["spatial_hash"] = int(sum(self.spatial_hash.device_bytes.values()))
             sizes["feature_pairs"] = self.feature_pairs.device_bytes
+            sizes["plane_filter"] = self.pair_filter.device_bytes
         if self.method == "pscc":
             sizes["bvh"] = self.bvh.device_bytes
             sizes["front"] = self.front.device_bytes

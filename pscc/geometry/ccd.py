@@ -161,18 +161,19 @@ def _strict_sign(value: float, magnitude: float, factor: float) -> float:
 
 
 @wp.func
-def _never_coplanar(
+def coplanarity_sign(
     q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, factor: float
-) -> bool:
-    """True when the four points provably never become coplanar during the step.
+) -> float:
+    """Strict sign that (e1(t) x e2(t)) . q(t) keeps over the whole step, or 0 if not provable.
 
-    The coplanarity function f(t) = (e1(t) x e2(t)) . q(t) is a cubic with Bernstein coefficients
-    k0 = n0.q0, 3 k1 = 2 nX.q0 + n0.q1, 3 k2 = 2 nX.q1 + n1.q0, k3 = n1.q1 (nX the middle control
-    normal). When all four have one strict sign, f never vanishes on [0, 1], so the vertex never
-    touches the face (the edges never touch). Each value is trusted only beyond
-    ``factor x`` its magnitude companion (the same sums of products with absolute values): at most
-    10 roundings separate each value from the exact float32 input, so the error is below
-    gamma_10 = 10 u times that companion; ``factor`` = 16 u covers it (see ``docs/ccd.md``).
+    This coplanarity function is a cubic with Bernstein coefficients k0 = n0.q0,
+    3 k1 = 2 nX.q0 + n0.q1, 3 k2 = 2 nX.q1 + n1.q0, k3 = n1.q1 (nX the middle control normal).
+    When all four have one strict sign, the cubic keeps that sign on [0, 1]: for q = p - a,
+    e1 = a - b, e2 = a - c, the point p stays strictly on one side of the moving plane of (a, b, c).
+    Each value is trusted only beyond ``factor x`` its magnitude companion (the same sums of
+    products with absolute values): at most 10 roundings separate each value from the exact float32
+    input, so its error is below gamma_10 = 10 u times that companion; ``factor`` = 16 u covers it
+    (see ``docs/ccd.md``).
     """
     de1 = e11 - e10
     de2 = e21 - e20
@@ -184,15 +185,46 @@ def _never_coplanar(
     mx = 0.5 * ((m0 + m1) + _abs_cross(de1, de2))
     s0 = _strict_sign(wp.dot(n0, q0), _abs_dot(m0, q0), factor)
     if s0 == 0.0:
-        return False
+        return 0.0
     s3 = _strict_sign(wp.dot(n1, q1), _abs_dot(m1, q1), factor)
     if s3 != s0:
-        return False
+        return 0.0
     s1 = _strict_sign(2.0 * wp.dot(nx, q0) + wp.dot(n0, q1), 2.0 * _abs_dot(mx, q0) + _abs_dot(m0, q1), factor)
     if s1 != s0:
-        return False
+        return 0.0
     s2 = _strict_sign(2.0 * wp.dot(nx, q1) + wp.dot(n1, q0), 2.0 * _abs_dot(mx, q1) + _abs_dot(m1, q0), factor)
-    return s2 == s0
+    if s2 != s0:
+        return 0.0
+    return s0
+
+
+@wp.func
+def _never_coplanar(
+    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, factor: float
+) -> bool:
+    """True when the four points provably never become coplanar during the step."""
+    return coplanarity_sign(q0, e10, e20, q1, e11, e21, factor) != 0.0
+
+
+@wp.func
+def vertex_plane_side(
+    p_t0: wp.vec3,
+    a_t0: wp.vec3,
+    b_t0: wp.vec3,
+    c_t0: wp.vec3,
+    p_t1: wp.vec3,
+    a_t1: wp.vec3,
+    b_t1: wp.vec3,
+    c_t1: wp.vec3,
+    params: CcdParameters,
+) -> float:
+    """+1 or -1 when vertex p provably stays strictly on that side of the moving plane of triangle
+    (a, b, c) during the whole step (coordinates translated to ``a_t0`` first), else 0."""
+    r = a_t0
+    ya0 = a_t0 - r
+    ya1 = a_t1 - r
+    return coplanarity_sign((p_t0 - r) - ya0, ya0 - (b_t0 - r), ya0 - (c_t0 - r),
+                            (p_t1 - r) - ya1, ya1 - (b_t1 - r), ya1 - (c_t1 - r), params.coplanarity_factor)
 
 
 @wp.func
