@@ -172,7 +172,8 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
     ]
     for r in rows:
         if r["method"] == "newton":
-            lines.append(f"| {r['scene']} | {r['triangles']:,} | DCD | newton | | | | | | {r['vertex_face_pairs']:,} | "
+            lines.append(f"| {r['scene']} | {r['triangles']:,} | DCD | newton | | | | | | "
+                         f"{r['vertex_face_pairs']:,} | "
                          f"{r['edge_edge_pairs']:,} | {r['seconds']:.3f} | |")
             continue
         lines.append(
