@@ -178,7 +178,8 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
             continue
         lines.append(
             f"| {r['scene']} | {r['triangles']:,} | {r['mode'].upper()} | {r['method']} | {r['bv_tests']:,} | "
-            f"{r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | {r['candidate_pairs']:,} | {r['vertex_face_pairs']:,} | "
+            f"{r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | {r['candidate_pairs']:,} | "
+            f"{r['vertex_face_pairs']:,} | "
             f"{r['edge_edge_pairs']:,} | {r['seconds']:.3f} | {r['bytes_per_triangle']:.0f} |")
     lines += ["", "Ratios (pscc / spatial-hash; pscc / newton for DCD time):", "",
               "| scene | triangles | mode | triangle pairs | BV tests | time | time vs newton |",
