@@ -274,7 +274,7 @@ def _compute_row_work(
     # out:
     row_work: wp.array(dtype=wp.int64),
 ):
-    """One thread per group slot (launched over all entries; slots past the group count get 0).
+    """One thread per group (slots past the group count, if launched, get 0).
 
     Row g holds the tests of every member of group g against every entry of the later groups of
     the same cell: n_g x (cell_end - group_end[g]). Summed over a cell: sum_{i<j} n_i n_j.
@@ -300,7 +300,7 @@ def _gather_table_info(
     last = group_rank.shape[0] - 1
     info[0] = wp.int64(group_rank[last])
     info[1] = wp.int64(cell_rank[last])
-    info[2] = row_scan[last]
+    info[2] = row_scan[row_scan.shape[0] - 1]
 
 
 @wp.func

@@ -30,7 +30,6 @@ from pscc.collision.candidates import CandidatePairs
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
-from pscc.collision.pair_filter import TrianglePairFilter
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
@@ -40,20 +39,6 @@ METHODS: tuple[str, ...] = ("pscc", "spatial-hash", "brute-force")
 """Detection methods of :class:`CollisionDetector`: ``pscc`` (normal-cone test front + paired-key
 spatial hash, the default), ``spatial-hash`` (the same hash with cell-only keys: no normal-cone
 culling) and ``brute-force`` (all feature pairs; the exact reference)."""
-
-
-@wp.kernel
-def _count_self_pairs(
-    # in:
-    pairs: wp.array(dtype=wp.vec2i),
-    object_ids: wp.array(dtype=wp.int32),
-    # out:
-    self_count: wp.array(dtype=wp.int32),
-):
-    """One thread per triangle pair: count pairs whose faces belong to the same object."""
-    pair = pairs[wp.tid()]
-    if object_ids[pair[0]] == object_ids[pair[1]]:
-        wp.atomic_add(self_count, 0, 1)
 
 
 def resolve_device(device: str | None) -> wp.Device:
@@ -158,7 +143,6 @@ class CollisionDetector:
         self._object_ids = wp.array(mesh.object_ids, dtype=wp.int32, device=device)
         self._positions_t0 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self._positions_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
-        self._self_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
@@ -167,9 +151,9 @@ class CollisionDetector:
             self._vertex_used = wp.array(used, dtype=wp.int32, device=device)
             self.brute_force = BroadPhaseBruteForce(self.boxes, self._vertex_used, device)
             return
-        self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor)
+        # The detector sorts its final rows, so the hash's own pair sort is not needed.
+        self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False)
         self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
-        self.pair_filter = TrianglePairFilter(self._faces, device)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
@@ -248,15 +232,10 @@ class CollisionDetector:
             seconds["spatial_hash"] = time.perf_counter() - mark
             mark = time.perf_counter()
             x1_device = self._positions_t1 if x1 is not None else None
-            pairs, count = self.pair_filter.filter(pairs, box_pairs, self._positions_t0, x1_device, h)
-            self._self_count.zero_()
-            if count > 0:
-                wp.launch(_count_self_pairs, dim=count, inputs=[pairs, self._object_ids],
-                          outputs=[self._self_count], device=self.device)
-            self_pairs = int(self._self_count.numpy()[0])
-            seconds["plane_filter"] = time.perf_counter() - mark
-            mark = time.perf_counter()
-            self.feature_pairs.extract(pairs, count, self.candidates)
+            self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
+                                       self._object_ids)
+            count = self.feature_pairs.kept_pairs
+            self_pairs = self.feature_pairs.kept_self_pairs
             seconds["feature_pairs"] = time.perf_counter() - mark
             hash_stats = self.spatial_hash.stats
             stats.update(bv_tests=int(hash_stats.bv_tests), box_pairs=int(box_pairs), triangle_pairs=int(count),
@@ -348,7 +327,6 @@ class CollisionDetector:
         if self.method != "brute-force":
             sizes["spatial_hash"] = int(sum(self.spatial_hash.device_bytes.values()))
             sizes["feature_pairs"] = self.feature_pairs.device_bytes
-            sizes["plane_filter"] = self.pair_filter.device_bytes
         if self.method == "pscc":
             sizes["bvh"] = self.bvh.device_bytes
             sizes["front"] = self.front.device_bytes

@@ -14,8 +14,10 @@ owned_vertex_bits         (face_count,) int32  bit k set: the face owns its vert
 owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge k (face_edges)
 ========================  ===================  ==============================================
 
+Before counting, each triangle pair meets the supporting-plane test of
+:mod:`pscc.collision.pair_filter` and is dropped when a plane separates its triangles.
 Extraction is count -> exclusive scan -> fill, so the output order depends only on the order of
-the triangle pairs (deterministic on every device).
+the triangle pairs.
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from pscc import tolerances
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.pair_filter import triangle_pair_separated
+from pscc.geometry.ccd import CcdParameters, ccd_parameters
 from pscc.mesh.topology import MeshTopology
 
 wp.set_module_options({"enable_backward": False})
@@ -84,6 +89,19 @@ def _vertex_face_fill(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.arr
     return count
 
 
+@wp.struct
+class PlaneTestArgs:
+    """Inputs of the supporting-plane test run before counting (see :mod:`pscc.collision.pair_filter`)."""
+
+    positions_t0: wp.array(dtype=wp.vec3)
+    positions_t1: wp.array(dtype=wp.vec3)
+    object_ids: wp.array(dtype=wp.int32)
+    swept: wp.int32
+    thickness: wp.float32
+    factor: wp.float32
+    params: CcdParameters
+
+
 @wp.kernel
 def _count_features(
     # in:
@@ -93,15 +111,26 @@ def _count_features(
     owned_vertex_bits: wp.array(dtype=wp.int32),
     owned_edge_bits: wp.array(dtype=wp.int32),
     triangle_pairs: wp.array(dtype=wp.vec2i),
+    planes: PlaneTestArgs,
     # out:
     vertex_face_counts: wp.array(dtype=wp.int32),
     edge_edge_counts: wp.array(dtype=wp.int32),
+    pair_stats: wp.array(dtype=wp.int32),
 ):
-    """One thread per triangle pair: how many feature pairs it emits."""
+    """One thread per triangle pair: drop it when a supporting plane separates it, else count the
+    feature pairs it emits (and the kept pairs, all and within one object, in ``pair_stats``)."""
     i = wp.tid()
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
+    if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
+                               planes.thickness, planes.factor, planes.params):
+        vertex_face_counts[i] = 0
+        edge_edge_counts[i] = 0
+        return
+    wp.atomic_add(pair_stats, 0, 1)
+    if planes.object_ids[a] == planes.object_ids[b]:
+        wp.atomic_add(pair_stats, 1, 1)
     vf = _vertex_face_count(faces, owned_vertex_bits, a, b) + _vertex_face_count(faces, owned_vertex_bits, b, a)
     ee = int(0)
     bits_a = owned_edge_bits[a]
@@ -131,8 +160,12 @@ def _fill_features(
     vertex_face_out: wp.array(dtype=wp.vec2i),
     edge_edge_out: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per triangle pair: write its feature pairs at its scanned offsets."""
+    """One thread per triangle pair: write its feature pairs at its scanned offsets.
+
+    A pair that emits nothing (no feature pair, or separated by a supporting plane) is skipped."""
     i = wp.tid()
+    if vertex_face_offsets[i + 1] == vertex_face_offsets[i] and edge_edge_offsets[i + 1] == edge_edge_offsets[i]:
+        return
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
@@ -176,6 +209,12 @@ class FeaturePairs:
         self.faces = faces_device
         self.edges = edges_device
         self._counts = [wp.empty(1, dtype=wp.int32, device=device) for _ in range(4)]
+        self.pair_stats = wp.zeros(2, dtype=wp.int32, device=device)
+        self.planes = PlaneTestArgs()
+        self.planes.factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
+        self.planes.params = ccd_parameters()
+        self.kept_pairs = 0
+        self.kept_self_pairs = 0
 
     @property
     def device_bytes(self) -> int:
@@ -185,14 +224,33 @@ class FeaturePairs:
 
     def _scratch(self, index: int, size: int) -> wp.array:
         if self._counts[index].shape[0] < size:
-            self._counts[index] = wp.empty(max(size, 2 * self._counts[index].shape[0]), dtype=wp.int32,
-                                           device=self.device)
+            self._counts[index] = wp.empty(int(1.25 * size) + 1024, dtype=wp.int32, device=self.device)
         return self._counts[index]
 
-    def extract(self, triangle_pairs: wp.array, pair_count: int, candidates: CandidatePairs) -> None:
-        """Write the feature pairs of the first ``pair_count`` triangle pairs into ``candidates``.
+    def extract(
+        self,
+        triangle_pairs: wp.array,
+        pair_count: int,
+        candidates: CandidatePairs,
+        positions_t0: wp.array,
+        positions_t1: wp.array | None,
+        thickness: float,
+        object_ids: wp.array,
+    ) -> None:
+        """Write the feature pairs of the first ``pair_count`` triangle pairs into ``candidates``,
+        skipping pairs that a supporting plane separates (:mod:`pscc.collision.pair_filter`).
 
-        Reads two totals to the host (a sync point) to size the output exactly.
+        Args:
+            triangle_pairs: candidate triangle pairs from a broad phase.
+            pair_count: number of valid pairs.
+            candidates: output buffers (grown to the exact totals).
+            positions_t0: positions (DCD) or start of the step (CCD).
+            positions_t1: end of the step for CCD, else None.
+            thickness: the distance the broad-phase boxes were grown by.
+            object_ids: (face_count,) object of each face, for the self / inter pair counts.
+
+        Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that passed.
+        Reads the totals to the host (a sync point) to size the output exactly.
         Allocates: only when ``candidates`` or the scratch arrays must grow. Capture-safe: no.
         """
         n = int(pair_count)
@@ -202,16 +260,26 @@ class FeaturePairs:
         ee_offsets = self._scratch(3, n + 1)
         vf_counts.zero_()
         ee_counts.zero_()
+        self.pair_stats.zero_()
+        planes = self.planes
+        planes.positions_t0 = positions_t0
+        planes.positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
+        planes.object_ids = object_ids
+        planes.swept = 1 if positions_t1 is not None else 0
+        planes.thickness = float(thickness)
         if n > 0:
             wp.launch(_count_features, dim=n, device=self.device,
                       inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                              self.owned_edge_bits, triangle_pairs],
-                      outputs=[vf_counts, ee_counts])
+                              self.owned_edge_bits, triangle_pairs, planes],
+                      outputs=[vf_counts, ee_counts, self.pair_stats])
         # Exclusive scan over n + 1 entries: the last offset is the total.
         wp.utils.array_scan(vf_counts[: n + 1], vf_offsets[: n + 1], inclusive=False)
         wp.utils.array_scan(ee_counts[: n + 1], ee_offsets[: n + 1], inclusive=False)
         total_vf = int(vf_offsets[n : n + 1].numpy()[0])
         total_ee = int(ee_offsets[n : n + 1].numpy()[0])
+        stats = self.pair_stats.numpy()
+        self.kept_pairs = int(stats[0])
+        self.kept_self_pairs = int(stats[1])
         candidates.ensure(total_vf, total_ee)
         if n > 0:
             wp.launch(_fill_features, dim=n, device=self.device,

@@ -21,12 +21,14 @@ face_cells / face_end      (face_count,) int64   cells a face's box overlaps / i
 entry_key / entry_face     (2 E,) int64 / int32  {cell, node} key and face of each entry, sorted by key
                                                  (the second half is radix-sort scratch)
 group_rank / cell_rank     (E,) int32            1-based group / cell of each sorted entry (scans of heads)
-group_start / group_end    (G,) int32            entry range of group g (triangleHashTable row g)
+group_start / group_end    (E,) / (G,) int32     entry range of group g (triangleHashTable row g);
+                                                 group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
-cell_end                   (C,) int32            one past the last entry of cell c
+cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
 row_work / row_scan        (G,) int64            BV tests of row g = n_g x entries of later groups of its
                                                  cell / inclusive scan (searched by the test threads)
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
+                                                 (P slots and no keys when ``sort_pairs`` is off)
 counts                     (2,) int64            [pairs emitted, same-node tests (always 0)]
 =========================  ====================  ===========================================================
 
@@ -137,6 +139,9 @@ class SpatialHash:
             the cell size (>= 1).
         pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
         tests_per_launch: BV tests per launch of the test kernel.
+        sort_pairs: sort the emitted pairs by (a, b) (deterministic order on every device). Without
+            sorting, the order follows the atomic appends (deterministic on the CPU only) and the
+            pair buffer needs half the memory; the detector sorts its final results anyway.
 
     Raises:
         InputError: invalid arguments.
@@ -153,7 +158,9 @@ class SpatialHash:
         max_mean_cells_per_face: float = DEFAULT_MAX_MEAN_CELLS_PER_FACE,
         pair_capacity: int | None = None,
         tests_per_launch: int = TESTS_PER_LAUNCH,
+        sort_pairs: bool = True,
     ) -> None:
+        self.sort_pairs = bool(sort_pairs)
         if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
             raise InputError("argument", "face_count", f"{face_count!r} is not an integer >= 0",
                              "pass the number of faces")
@@ -220,6 +227,13 @@ class SpatialHash:
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
         self.group_start = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.cell_end = wp.empty(capacity, dtype=wp.int32, device=dev)
+        if not hasattr(self, "group_end"):
+            self._allocate_groups(max(1, capacity // 4))
+
+    def _allocate_groups(self, capacity: int) -> None:
+        """Per-group tables, sized by the group count (far below the entry count on cloth)."""
+        dev = self.device
+        self.group_capacity = capacity
         self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.row_work = wp.empty(capacity, dtype=wp.int64, device=dev)
@@ -227,8 +241,10 @@ class SpatialHash:
 
     def _allocate_pairs(self, capacity: int) -> None:
         self.pair_capacity = capacity
-        self.pairs = wp.empty(2 * capacity, dtype=wp.vec2i, device=self.device)
-        self.pair_keys = wp.empty(2 * capacity, dtype=wp.int64, device=self.device)
+        # Sorting needs twice the slots (radix-sort scratch) and a key per pair.
+        slots = 2 * capacity if self.sort_pairs else capacity
+        self.pairs = wp.empty(slots, dtype=wp.vec2i, device=self.device)
+        self.pair_keys = wp.empty(slots if self.sort_pairs else 1, dtype=wp.int64, device=self.device)
 
     @property
     def device_bytes(self) -> dict[str, int]:
@@ -314,7 +330,8 @@ class SpatialHash:
         entries = self._insert_faces(face_lower, face_upper, node_id, grid, cell_size, extent)
         self._build_tables(entries)
         self._test_pairs(face_lower, face_upper, node_id, grid, entries)
-        self._sort_pairs()
+        if self.sort_pairs:
+            self._sort_pairs()
         self.stats.mean_cells_per_face = entries / self.face_count
         self.stats.device_bytes = self.device_bytes
         return self.pairs[: self._pair_count], self._pair_count
@@ -404,14 +421,17 @@ class SpatialHash:
                   device=dev)
         wp.utils.array_scan(self.group_start[:n], self.group_rank[:n], inclusive=True)
         wp.utils.array_scan(self.cell_end[:n], self.cell_rank[:n], inclusive=True)
+        groups = int(self.group_rank[n - 1 : n].numpy()[0])
+        if groups > self.group_capacity:
+            self._allocate_groups(int(groups * _GROWTH) + 1)
         wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n]],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
-        wp.launch(kernels._compute_row_work, dim=n,
+        wp.launch(kernels._compute_row_work, dim=groups,
                   inputs=[self.group_rank[:n], self.group_start, self.group_end, self.group_cell, self.cell_end],
                   outputs=[self.row_work], device=dev)
-        wp.utils.array_scan(self.row_work[:n], self.row_scan[:n], inclusive=True)
+        wp.utils.array_scan(self.row_work[:groups], self.row_scan[:groups], inclusive=True)
         wp.launch(kernels._gather_table_info, dim=1,
-                  inputs=[self.group_rank[:n], self.cell_rank[:n], self.row_scan[:n]],
+                  inputs=[self.group_rank[:n], self.cell_rank[:n], self.row_scan[:groups]],
                   outputs=[self.table_info], device=dev)
         info = self.table_info.numpy()
         self.stats.groups = int(info[0])

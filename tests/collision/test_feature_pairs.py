@@ -12,13 +12,19 @@ from pscc.collision.feature_pairs import FeaturePairs
 from pscc.mesh import MeshTopology, grid_sheet
 
 
-def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: str = "cpu"):
+def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: str = "cpu", positions=None,
+             thickness: float = 0.0):
+    """Extract with the supporting-plane test; all-zero positions make every plane degenerate (no pair
+    is separated), so every triangle pair is kept."""
     topology = MeshTopology.from_faces(faces, vertex_count)
     extractor = FeaturePairs(faces, topology, wp.array(faces, dtype=wp.vec3i, device=device),
                              wp.array(topology.edges, dtype=wp.vec2i, device=device), wp.get_device(device))
     candidates = CandidatePairs(1, 1, wp.get_device(device))
     triangle_pairs = wp.array(pairs.reshape(-1, 2).astype(np.int32), dtype=wp.vec2i, device=device)
-    extractor.extract(triangle_pairs, len(pairs), candidates)
+    x = np.zeros((vertex_count, 3), np.float32) if positions is None else positions
+    extractor.extract(triangle_pairs, len(pairs), candidates, wp.array(x, dtype=wp.vec3, device=device), None,
+                      thickness, wp.zeros(len(faces), dtype=wp.int32, device=device))
+    assert extractor.kept_pairs == (len(pairs) if positions is None else extractor.kept_pairs)
     vf = candidates.vertex_face.numpy()[: candidates.vertex_face_count].reshape(-1, 2)
     ee = candidates.edge_edge.numpy()[: candidates.edge_edge_count].reshape(-1, 2)
     return topology, vf, ee
@@ -62,3 +68,13 @@ def test_empty_input() -> None:
     vertices, faces, _ = grid_sheet(1, 1)
     _, vf, ee = _extract(faces, len(vertices), np.zeros((0, 2), np.int32))
     assert vf.shape == (0, 2) and ee.shape == (0, 2)
+
+
+def test_supporting_plane_drops_separated_pairs() -> None:
+    # Two parallel triangles 1.0 apart: separated for thickness 0.5, kept for thickness 2.
+    x = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], np.float32)
+    faces = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    _, vf, ee = _extract(faces, 6, np.array([[0, 1]]), positions=x, thickness=0.5)
+    assert len(vf) == 0 and len(ee) == 0
+    _, vf, ee = _extract(faces, 6, np.array([[0, 1]]), positions=x, thickness=2.0)
+    assert len(vf) == 6 and len(ee) == 9

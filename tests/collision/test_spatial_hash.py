@@ -282,3 +282,14 @@ def test_bad_arguments(device: str) -> None:
         SpatialHash(m, device, skip_adjacent=True)
     with pytest.raises(InputError, match="cell_size_factor"):
         SpatialHash(m, device, cell_size_factor=-1.0)
+
+
+def test_unsorted_pairs_are_the_same_set(device: str) -> None:
+    lower, upper, _ = _cloth_boxes(1500, seed=6)
+    patches = (np.arange(lower.shape[0]) // 40).astype(np.int32)
+    sorted_pairs, _ = _run(device, lower, upper, patches)
+    unsorted, hash_ = _run(device, lower, upper, patches, sort_pairs=False, pair_capacity=8)
+    assert hash_.stats.reruns > 0  # the unsorted buffer grew too
+    assert len(unsorted) == len(sorted_pairs)
+    np.testing.assert_array_equal(unsorted[np.lexsort(unsorted.T[::-1])], sorted_pairs)
+    assert hash_.device_bytes["pair_keys"] < 64
