@@ -317,9 +317,12 @@ def _find_row(row_scan: wp.array(dtype=wp.int64), group_count: int, k: wp.int64)
     return lo
 
 
-@wp.kernel
-def _test_bounding_volumes(
-    # in:
+TESTS_PER_THREAD = wp.constant(wp.int32(16))
+"""BV tests one thread runs back to back (one binary search per thread instead of per test)."""
+
+
+@wp.func
+def _test_one(
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
     node_id: wp.array(dtype=wp.int32),
@@ -327,16 +330,13 @@ def _test_bounding_volumes(
     skip_adjacent: int,
     grid: GridArgs,
     tables: TableArgs,
-    first_test: wp.int64,
+    g: int,
+    q: wp.int64,
     capacity: wp.int64,
-    # out:
     counts: wp.array(dtype=wp.int64),
     pairs: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per BV test k = first_test + tid (the paper's DecodePairsAndTest)."""
-    k = first_test + wp.int64(wp.tid())
-    g = _find_row(tables.row_scan, tables.group_count, k)
-    q = k - (tables.row_scan[g] - tables.row_work[g])
+    """BV test number q of row g: member q // rest of group g against entry q % rest after it."""
     rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
     entry_a = tables.group_start[g] + int(q // rest)
     entry_b = tables.group_end[g] + int(q % rest)
@@ -364,6 +364,46 @@ def _test_bounding_volumes(
     slot = wp.atomic_add(counts, 0, wp.int64(1))
     if slot < capacity:
         pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
+
+
+@wp.kernel
+def _test_bounding_volumes(
+    # in:
+    face_lower: wp.array(dtype=wp.vec3),
+    face_upper: wp.array(dtype=wp.vec3),
+    node_id: wp.array(dtype=wp.int32),
+    faces: wp.array(dtype=wp.vec3i),
+    skip_adjacent: int,
+    grid: GridArgs,
+    tables: TableArgs,
+    first_test: wp.int64,
+    end_test: wp.int64,
+    capacity: wp.int64,
+    # out:
+    counts: wp.array(dtype=wp.int64),
+    pairs: wp.array(dtype=wp.vec2i),
+):
+    """One thread per TESTS_PER_THREAD consecutive BV tests from first_test + tid x TESTS_PER_THREAD
+    (the paper's DecodePairsAndTest, with one binary search per thread): every thread gets the same
+    amount of work, and consecutive tests walk along the rows of the workload table."""
+    k = first_test + wp.int64(wp.tid()) * wp.int64(TESTS_PER_THREAD)
+    if k >= end_test:
+        return
+    g = _find_row(tables.row_scan, tables.group_count, k)
+    q = k - (tables.row_scan[g] - tables.row_work[g])
+    for _step in range(int(TESTS_PER_THREAD)):
+        if k >= end_test:
+            break
+        _test_one(face_lower, face_upper, node_id, faces, skip_adjacent, grid, tables, g, q, capacity,
+                  counts, pairs)
+        k += wp.int64(1)
+        q += wp.int64(1)
+        if q >= tables.row_work[g]:
+            # Next row with work (rows of groups that are last in their cell have none).
+            g += 1
+            while g < tables.group_count - 1 and tables.row_work[g] == wp.int64(0):
+                g += 1
+            q = wp.int64(0)
 
 
 @wp.kernel

@@ -455,10 +455,13 @@ class SpatialHash:
         total = self.stats.bv_tests
         while True:
             self.counts.zero_()
+            per_thread = int(kernels.TESTS_PER_THREAD)
             for first in range(0, total, self.tests_per_launch):
-                wp.launch(kernels._test_bounding_volumes, dim=min(self.tests_per_launch, total - first),
+                end = min(total, first + self.tests_per_launch)
+                threads = (end - first + per_thread - 1) // per_thread
+                wp.launch(kernels._test_bounding_volumes, dim=threads,
                           inputs=[face_lower, face_upper, node_id, self.faces, int(self.skip_adjacent), grid,
-                                  tables, first, self.pair_capacity],
+                                  tables, first, end, self.pair_capacity],
                           outputs=[self.counts, self.pairs], device=self.device)
             counts = self.counts.numpy()
             found = int(counts[0])
