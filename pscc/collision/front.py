@@ -53,6 +53,8 @@ class NodeTestArgs:
     positions_t0: wp.array(dtype=wp.vec3)
     positions_t1: wp.array(dtype=wp.vec3)
     directions: wp.array(dtype=wp.vec3)
+    direction_table: wp.array(dtype=nc.mask_type)
+    table_resolution: wp.int32
     node_mask: wp.array(dtype=nc.mask_type)
     node_normal: wp.array(dtype=wp.vec3)
     swept: wp.int32
@@ -122,10 +124,12 @@ def _refit_level(
             b1 = args.positions_t1[f[1]]
             c1 = args.positions_t1[f[2]]
             n = n + wp.cross(b1 - a1, c1 - a1)
-            node_mask[node] = nc.face_mask_swept(a0, b0, c0, a1, b1, c1, args.directions, args.margin,
-                                                 args.degenerate_ratio)
+            node_mask[node] = nc.face_mask_swept_fast(a0, b0, c0, a1, b1, c1, args.direction_table,
+                                                      args.table_resolution, args.directions, args.margin,
+                                                      args.degenerate_ratio)
         else:
-            node_mask[node] = nc.face_mask(a0, b0, c0, args.directions, args.margin, args.degenerate_ratio)
+            node_mask[node] = nc.face_mask_fast(a0, b0, c0, args.direction_table, args.table_resolution,
+                                                args.degenerate_ratio)
         node_normal[node] = n
         return
     left = bvh.left[node]
@@ -291,6 +295,8 @@ class NormalConeFront:
         self._lifted = wp.zeros(1, dtype=wp.int32, device=device)
         self.node_id = wp.zeros(bvh.face_count, dtype=wp.int32, device=device)
         self.directions = wp.array(nc.sample_directions(), dtype=wp.vec3, device=device)
+        table = nc.direction_mask_table(nc.TABLE_RESOLUTION, tolerances.NORMAL_CONE_MARGIN)
+        self.direction_table = wp.array(table, dtype=nc.mask_type, device=device)
         roots = np.asarray(bvh.roots, dtype=np.int32)
         self.front.assign(np.concatenate([roots, np.zeros(n - len(roots), np.int32)]))
         self.front_size = int(len(roots))
@@ -298,6 +304,8 @@ class NormalConeFront:
         self.args.bvh = bvh.arrays
         self.args.faces = faces
         self.args.directions = self.directions
+        self.args.direction_table = self.direction_table
+        self.args.table_resolution = nc.TABLE_RESOLUTION
         self.args.node_mask = self.node_mask
         self.args.node_normal = self.node_normal
         self.args.margin = tolerances.NORMAL_CONE_MARGIN
@@ -309,7 +317,8 @@ class NormalConeFront:
         """Bytes held on the device by the front's buffers (the BVH is counted separately)."""
         arrays = (self.node_mask, self.node_normal, self.front, self._front_next, self._frontier,
                   self._frontier_next, self._keep, self._split, self._keep_offsets, self._split_offsets,
-                  self._sort_keys, self._sort_values, self.in_front, self._lifted, self.node_id, self.directions)
+                  self._sort_keys, self._sort_values, self.in_front, self._lifted, self.node_id, self.directions,
+                  self.direction_table)
         return sum(a.capacity for a in arrays)
 
     def update(self, positions_t0: wp.array, positions_t1: wp.array | None = None) -> wp.array:

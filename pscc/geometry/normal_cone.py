@@ -27,6 +27,7 @@ failure, so the test is conservative.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -281,3 +282,119 @@ def contour_test_swept(
             crossings += 1
         previous = current
     return crossings == 1
+
+
+TABLE_RESOLUTION: int = 32
+"""Cells per cube-face side of the direction-mask lookup table (6 x 32 x 32 cells)."""
+
+
+@functools.lru_cache(maxsize=4)
+def direction_mask_table(resolution: int = TABLE_RESOLUTION, margin: float = 1.0e-5,
+                         slack: float = 1.0e-2) -> np.ndarray:
+    """Conservative direction masks per cube-map cell, (6 * resolution^2, 4) uint32.
+
+    A normal n is mapped to the cell of the cube face of its largest |component|. The cell's mask
+    holds the sample directions d whose angle to the cell's centre is below 90 degrees minus the
+    cell's angular radius (the largest angle from its centre to a corner, since a cube-face cell is
+    a convex spherical quadrilateral), minus ``slack`` radians (cells adjacent through rounding of
+    the lookup), minus asin(``margin``). Every d in the mask then has d . n > margin |n| for every
+    n of the cell: the table mask is a subset of the exact :func:`face_mask` bits.
+    """
+    directions = sample_directions().astype(np.float64)
+    r = resolution
+    edges = np.linspace(-1.0, 1.0, r + 1)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    table = np.zeros((6, r, r, 4), dtype=np.uint32)
+    for face in range(6):
+        axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
+        others = [k for k in range(3) if k != axis]
+        for i in range(r):
+            for j in range(r):
+                def direction(u: float, v: float, axis=axis, sign=sign, others=others) -> np.ndarray:
+                    p = np.zeros(3)
+                    p[axis] = sign
+                    p[others[0]] = u
+                    p[others[1]] = v
+                    return p / np.linalg.norm(p)
+                centre = direction(centres[i], centres[j])
+                corners = [direction(edges[i + a], edges[j + b]) for a in (0, 1) for b in (0, 1)]
+                radius = max(np.arccos(np.clip(centre @ c, -1.0, 1.0)) for c in corners)
+                limit = np.pi / 2 - radius - slack - np.arcsin(margin)
+                ok = np.arccos(np.clip(directions @ centre, -1.0, 1.0)) < limit
+                for k in np.flatnonzero(ok):
+                    table[face, i, j, k // 32] |= np.uint32(1) << np.uint32(k % 32)
+    return table.reshape(-1, 4)
+
+
+@wp.func
+def lookup_mask(n: wp.vec3, table: wp.array(dtype=mask_type), resolution: int) -> mask_type:
+    """Table mask of the cube-map cell of direction ``n`` (a subset of the exact mask); n != 0."""
+    ax = wp.abs(n[0])
+    ay = wp.abs(n[1])
+    az = wp.abs(n[2])
+    face = int(0)
+    major = n[0]
+    u = n[1]
+    v = n[2]
+    if ay >= ax and ay >= az:
+        face = 2
+        major = n[1]
+        u = n[0]
+        v = n[2]
+    elif az >= ax and az >= ay:
+        face = 4
+        major = n[2]
+        u = n[0]
+        v = n[1]
+    if major < 0.0:
+        face += 1
+    scale = 1.0 / wp.abs(major)
+    i = wp.clamp(int((u * scale + 1.0) * 0.5 * float(resolution)), 0, resolution - 1)
+    j = wp.clamp(int((v * scale + 1.0) * 0.5 * float(resolution)), 0, resolution - 1)
+    return table[(face * resolution + i) * resolution + j]
+
+
+@wp.func
+def face_mask_fast(
+    a: wp.vec3, b: wp.vec3, c: wp.vec3, table: wp.array(dtype=mask_type), resolution: int, degenerate_ratio: float
+) -> mask_type:
+    """:func:`face_mask` through the lookup table (a subset of its bits); empty when degenerate."""
+    e1 = b - a
+    e2 = c - a
+    n = wp.cross(e1, e2)
+    if _degenerate(e1, e2, n, degenerate_ratio):
+        return mask_type(wp.uint32(0), wp.uint32(0), wp.uint32(0), wp.uint32(0))
+    return lookup_mask(n, table, resolution)
+
+
+@wp.func
+def face_mask_swept_fast(
+    a0: wp.vec3,
+    b0: wp.vec3,
+    c0: wp.vec3,
+    a1: wp.vec3,
+    b1: wp.vec3,
+    c1: wp.vec3,
+    table: wp.array(dtype=mask_type),
+    resolution: int,
+    directions: wp.array(dtype=wp.vec3),
+    margin: float,
+    degenerate_ratio: float,
+) -> mask_type:
+    """:func:`face_mask_swept` with table lookups for n0 and n1 (nX, which may be tiny and so has
+    an unreliable direction, keeps the exact test)."""
+    e10 = b0 - a0
+    e20 = c0 - a0
+    e11 = b1 - a1
+    e21 = c1 - a1
+    n0 = wp.cross(e10, e20)
+    n1 = wp.cross(e11, e21)
+    empty = mask_type(wp.uint32(0), wp.uint32(0), wp.uint32(0), wp.uint32(0))
+    if _degenerate(e10, e20, n0, degenerate_ratio) or _degenerate(e11, e21, n1, degenerate_ratio):
+        return empty
+    m = mask_and(lookup_mask(n0, table, resolution), lookup_mask(n1, table, resolution))
+    if mask_is_empty(m):
+        return empty
+    dn = wp.cross(e11 - e10, e21 - e20)
+    nx = 0.5 * (n0 + n1 - dn)
+    return mask_and(m, _mask_with(nx, directions, margin, True))

@@ -176,3 +176,29 @@ def test_directions_cover_the_sphere() -> None:
     probe /= np.linalg.norm(probe, axis=1, keepdims=True)
     covering = np.degrees(np.arccos(np.clip((probe @ directions.T).max(axis=1), -1, 1))).max()
     assert covering < 15.0, f"covering radius {covering:.1f} degrees"
+
+
+@wp.kernel
+def _lookup_kernel(normals: wp.array(dtype=wp.vec3), table: wp.array(dtype=nc.mask_type), resolution: int,
+                   out: wp.array(dtype=nc.mask_type)):
+    i = wp.tid()
+    out[i] = nc.lookup_mask(normals[i], table, resolution)
+
+
+def test_lookup_table_masks_are_subsets_of_exact_masks(device) -> None:
+    rng = np.random.default_rng(4)
+    normals = rng.normal(size=(3000, 3))
+    # Axis-aligned, diagonal and cube-edge directions, where cells meet.
+    special = [[1, 0, 0], [0, -1, 0], [0, 0, 1], [1, 1, 0], [1, -1, 1], [0.5, 1, 1], [1, 1e-7, -1e-7]]
+    normals = np.concatenate([normals, np.array(special, dtype=np.float64)]) * rng.uniform(1e-3, 1e3, (3007, 1))
+    normals = normals.astype(np.float32)
+    table = nc.direction_mask_table(nc.TABLE_RESOLUTION, MARGIN)
+    out = wp.zeros(len(normals), dtype=nc.mask_type, device=device)
+    wp.launch(_lookup_kernel, dim=len(normals), device=device,
+              inputs=[wp.array(normals, dtype=wp.vec3, device=device),
+                      wp.array(table, dtype=nc.mask_type, device=device), nc.TABLE_RESOLUTION, out])
+    bits = np.unpackbits(out.numpy().astype("<u4").view(np.uint8), bitorder="little").reshape(len(normals), -1)
+    directions = nc.sample_directions().astype(np.float64)
+    dots = normals.astype(np.float64) @ directions.T / np.linalg.norm(normals.astype(np.float64), axis=1)[:, None]
+    assert np.all(dots[bits.astype(bool)] > MARGIN), "a table direction does not see the normal"
+    assert bits.sum(axis=1).min() >= 50, "the table keeps most of the hemisphere"
