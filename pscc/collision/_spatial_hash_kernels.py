@@ -317,10 +317,6 @@ def _find_row(row_scan: wp.array(dtype=wp.int64), group_count: int, k: wp.int64)
     return lo
 
 
-TESTS_PER_THREAD = wp.constant(wp.int32(16))
-"""BV tests one thread runs back to back (one binary search per thread instead of per test)."""
-
-
 @wp.func
 def _test_one(
     face_lower: wp.array(dtype=wp.vec3),
@@ -378,20 +374,22 @@ def _test_bounding_volumes(
     tables: TableArgs,
     first_test: wp.int64,
     end_test: wp.int64,
+    tests_per_thread: int,
     capacity: wp.int64,
     # out:
     counts: wp.array(dtype=wp.int64),
     pairs: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per TESTS_PER_THREAD consecutive BV tests from first_test + tid x TESTS_PER_THREAD
-    (the paper's DecodePairsAndTest, with one binary search per thread): every thread gets the same
-    amount of work, and consecutive tests walk along the rows of the workload table."""
-    k = first_test + wp.int64(wp.tid()) * wp.int64(TESTS_PER_THREAD)
+    """The paper's DecodePairsAndTest: thread tid runs BV tests first_test + tid x tests_per_thread
+    onwards, ``tests_per_thread`` of them (1 = one thread per BV test). Every thread gets the same
+    amount of work; consecutive tests walk along the rows of the workload table, so a batch needs
+    one binary search."""
+    k = first_test + wp.int64(wp.tid()) * wp.int64(tests_per_thread)
     if k >= end_test:
         return
     g = _find_row(tables.row_scan, tables.group_count, k)
     q = k - (tables.row_scan[g] - tables.row_work[g])
-    for _step in range(int(TESTS_PER_THREAD)):
+    for _step in range(tests_per_thread):
         if k >= end_test:
             break
         _test_one(face_lower, face_upper, node_id, faces, skip_adjacent, grid, tables, g, q, capacity,

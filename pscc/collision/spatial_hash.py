@@ -139,6 +139,10 @@ class SpatialHash:
             the cell size (>= 1).
         pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
         tests_per_launch: BV tests per launch of the test kernel.
+        tests_per_thread: BV tests each thread of the test kernel runs back to back. ``None``: 1 on
+            a GPU (the paper's one thread per BV test) and 16 on the CPU, whose kernel threads run
+            one after the other (one binary search per 16 tests instead of per test). Either way
+            every thread gets the same amount of work.
         sort_pairs: sort the emitted pairs by (a, b) (deterministic order on every device). Without
             sorting, the order follows the atomic appends (deterministic on the CPU only) and the
             pair buffer needs half the memory; the detector sorts its final results anyway.
@@ -159,6 +163,7 @@ class SpatialHash:
         pair_capacity: int | None = None,
         tests_per_launch: int = TESTS_PER_LAUNCH,
         sort_pairs: bool = True,
+        tests_per_thread: int | None = None,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
         if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
@@ -172,6 +177,12 @@ class SpatialHash:
             raise InputError("argument", "pair_capacity", f"{pair_capacity!r} is not an integer >= 0",
                              "pass a non-negative integer or None")
         self.device = wp.get_device(device)
+        if tests_per_thread is None:
+            tests_per_thread = 1 if self.device.is_cuda else 16
+        if isinstance(tests_per_thread, bool) or not isinstance(tests_per_thread, int) or tests_per_thread < 1:
+            raise InputError("argument", "tests_per_thread", f"{tests_per_thread!r} is not an integer >= 1",
+                             "pass a positive integer or None")
+        self.tests_per_thread = int(tests_per_thread)
         self.face_count = int(face_count)
         self.cell_size_factor = _check_positive(cell_size_factor, "cell_size_factor")
         self.max_mean_cells_per_face = _check_positive(max_mean_cells_per_face, "max_mean_cells_per_face")
@@ -455,13 +466,13 @@ class SpatialHash:
         total = self.stats.bv_tests
         while True:
             self.counts.zero_()
-            per_thread = int(kernels.TESTS_PER_THREAD)
+            per_thread = self.tests_per_thread
             for first in range(0, total, self.tests_per_launch):
                 end = min(total, first + self.tests_per_launch)
                 threads = (end - first + per_thread - 1) // per_thread
                 wp.launch(kernels._test_bounding_volumes, dim=threads,
                           inputs=[face_lower, face_upper, node_id, self.faces, int(self.skip_adjacent), grid,
-                                  tables, first, end, self.pair_capacity],
+                                  tables, first, end, per_thread, self.pair_capacity],
                           outputs=[self.counts, self.pairs], device=self.device)
             counts = self.counts.numpy()
             found = int(counts[0])

@@ -293,3 +293,12 @@ def test_unsorted_pairs_are_the_same_set(device: str) -> None:
     assert len(unsorted) == len(sorted_pairs)
     np.testing.assert_array_equal(unsorted[np.lexsort(unsorted.T[::-1])], sorted_pairs)
     assert hash_.device_bytes["pair_keys"] < 64
+
+
+def test_tests_per_thread_does_not_change_pairs(device: str) -> None:
+    lower, upper, _ = _cloth_boxes(1200, seed=8)
+    patches = (np.arange(lower.shape[0]) // 30).astype(np.int32)
+    one, hash_one = _run(device, lower, upper, patches, tests_per_thread=1)
+    many, hash_many = _run(device, lower, upper, patches, tests_per_thread=7)
+    np.testing.assert_array_equal(one, many)
+    assert hash_one.stats.bv_tests == hash_many.stats.bv_tests
