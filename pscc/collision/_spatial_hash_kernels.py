@@ -317,51 +317,6 @@ def _find_row(row_scan: wp.array(dtype=wp.int64), group_count: int, k: wp.int64)
     return lo
 
 
-@wp.func
-def _test_one(
-    face_lower: wp.array(dtype=wp.vec3),
-    face_upper: wp.array(dtype=wp.vec3),
-    node_id: wp.array(dtype=wp.int32),
-    faces: wp.array(dtype=wp.vec3i),
-    skip_adjacent: int,
-    grid: GridArgs,
-    tables: TableArgs,
-    g: int,
-    q: wp.int64,
-    capacity: wp.int64,
-    counts: wp.array(dtype=wp.int64),
-    pairs: wp.array(dtype=wp.vec2i),
-):
-    """BV test number q of row g: member q // rest of group g against entry q % rest after it."""
-    rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
-    entry_a = tables.group_start[g] + int(q // rest)
-    entry_b = tables.group_end[g] + int(q % rest)
-    fa = tables.entry_face[entry_a]
-    fb = tables.entry_face[entry_b]
-    if node_id[fa] == node_id[fb]:
-        # Cannot happen: later groups of a cell have other node ids. Counted so tests can assert it.
-        wp.atomic_add(counts, 1, wp.int64(1))
-        return
-    lower_a = face_lower[fa]
-    lower_b = face_lower[fb]
-    if not boxes_overlap(lower_a, face_upper[fa], lower_b, face_upper[fb]):
-        return
-    # Token position: only the cell holding the lower corner of the boxes' intersection emits.
-    token = cell_of_point(wp.max(lower_a, lower_b), grid.origin, grid.cell_size)
-    if linear_cell_id(token, grid.dims) != key_cell(tables.entry_key[entry_a]):
-        return
-    if skip_adjacent != 0:
-        ta = faces[fa]
-        tb = faces[fb]
-        for u in range(3):
-            for v in range(3):
-                if ta[u] == tb[v]:
-                    return
-    slot = wp.atomic_add(counts, 0, wp.int64(1))
-    if slot < capacity:
-        pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
-
-
 @wp.kernel
 def _test_bounding_volumes(
     # in:
@@ -389,11 +344,48 @@ def _test_bounding_volumes(
         return
     g = _find_row(tables.row_scan, tables.group_count, k)
     q = k - (tables.row_scan[g] - tables.row_work[g])
+    # Per-row values, reloaded only when the walk enters the next row.
+    rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
+    row_cell = key_cell(tables.entry_key[tables.group_start[g]])
+    current_a = int(-1)
+    fa = int(0)
+    node_a = int(0)
+    lower_a = wp.vec3(0.0, 0.0, 0.0)
+    upper_a = wp.vec3(0.0, 0.0, 0.0)
     for _step in range(tests_per_thread):
         if k >= end_test:
             break
-        _test_one(face_lower, face_upper, node_id, faces, skip_adjacent, grid, tables, g, q, capacity,
-                  counts, pairs)
+        entry_a = tables.group_start[g] + int(q // rest)
+        if entry_a != current_a:
+            current_a = entry_a
+            fa = tables.entry_face[entry_a]
+            node_a = node_id[fa]
+            lower_a = face_lower[fa]
+            upper_a = face_upper[fa]
+        fb = tables.entry_face[tables.group_end[g] + int(q % rest)]
+        emit = True
+        if node_a == node_id[fb]:
+            # Cannot happen: later groups of a cell have other node ids. Counted so tests can assert it.
+            wp.atomic_add(counts, 1, wp.int64(1))
+            emit = False
+        if emit:
+            lower_b = face_lower[fb]
+            emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
+            if emit:
+                # Token position: only the cell holding the lower corner of the boxes' intersection emits.
+                token = cell_of_point(wp.max(lower_a, lower_b), grid.origin, grid.cell_size)
+                emit = linear_cell_id(token, grid.dims) == row_cell
+            if emit and skip_adjacent != 0:
+                ta = faces[fa]
+                tb = faces[fb]
+                for u in range(3):
+                    for v in range(3):
+                        if ta[u] == tb[v]:
+                            emit = False
+            if emit:
+                slot = wp.atomic_add(counts, 0, wp.int64(1))
+                if slot < capacity:
+                    pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
         k += wp.int64(1)
         q += wp.int64(1)
         if q >= tables.row_work[g]:
@@ -402,6 +394,9 @@ def _test_bounding_volumes(
             while g < tables.group_count - 1 and tables.row_work[g] == wp.int64(0):
                 g += 1
             q = wp.int64(0)
+            rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
+            row_cell = key_cell(tables.entry_key[tables.group_start[g]])
+            current_a = -1
 
 
 @wp.kernel

@@ -343,17 +343,23 @@ class CollisionDetector:
         ee_toi = self.narrow.edge_edge_toi.numpy()[:ee_count]
         vf_keep = vf_toi <= 1.0
         ee_keep = ee_toi <= 1.0
-        vertex_face = vf_pairs[vf_keep].astype(np.int32)
+        vf_ids = vf_pairs[vf_keep].astype(np.int64)
+        ee_ids = ee_pairs[ee_keep].astype(np.int64)
         vf_toi = vf_toi[vf_keep]
-        edges = self.topology.edges
-        ee_ids = ee_pairs[ee_keep]
-        edge_edge = np.concatenate([edges[ee_ids[:, 0]], edges[ee_ids[:, 1]]], axis=1).astype(np.int32)
         ee_toi = ee_toi[ee_keep]
-        vf_order = np.lexsort(vertex_face.T[::-1]) if len(vertex_face) else np.zeros(0, dtype=np.int64)
-        ee_order = np.lexsort(edge_edge.T[::-1]) if len(edge_edge) else np.zeros(0, dtype=np.int64)
+        # One int64 key per row gives the lexicographic order: (vertex, face), and (edge a, edge b)
+        # with edges sorted lexicographically, so edge-id order is vertex-tuple order.
+        vf_order = np.argsort(vf_ids[:, 0] * self._faces_np.shape[0] + vf_ids[:, 1], kind="stable")
+        ee_order = np.argsort(ee_ids[:, 0] * self.topology.edge_count + ee_ids[:, 1], kind="stable")
+        vertex_face = vf_ids[vf_order].astype(np.int32)
+        edges = self.topology.edges
+        ee_sorted = ee_ids[ee_order]
+        edge_edge = np.concatenate([edges[ee_sorted[:, 0]], edges[ee_sorted[:, 1]]], axis=1).astype(np.int32)
+        vf_toi = vf_toi[vf_order]
+        ee_toi = ee_toi[ee_order]
         return CollisionResult(
-            vertex_face=np.ascontiguousarray(vertex_face[vf_order]).reshape(-1, 2),
-            edge_edge=np.ascontiguousarray(edge_edge[ee_order]).reshape(-1, 4),
-            vertex_face_toi=vf_toi[vf_order].astype(np.float32) if ccd else None,
-            edge_edge_toi=ee_toi[ee_order].astype(np.float32) if ccd else None,
+            vertex_face=np.ascontiguousarray(vertex_face).reshape(-1, 2),
+            edge_edge=np.ascontiguousarray(edge_edge).reshape(-1, 4),
+            vertex_face_toi=vf_toi.astype(np.float32) if ccd else None,
+            edge_edge_toi=ee_toi.astype(np.float32) if ccd else None,
         )
