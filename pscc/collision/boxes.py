@@ -90,6 +90,18 @@ def _compute_face_boxes(
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
 
 
+@wp.struct
+class PrimitiveBoxArgs:
+    """The six box arrays of :class:`PrimitiveBoxes`, bundled as one kernel argument."""
+
+    vertex_lower: wp.array(dtype=wp.vec3)
+    vertex_upper: wp.array(dtype=wp.vec3)
+    edge_lower: wp.array(dtype=wp.vec3)
+    edge_upper: wp.array(dtype=wp.vec3)
+    face_lower: wp.array(dtype=wp.vec3)
+    face_upper: wp.array(dtype=wp.vec3)
+
+
 class PrimitiveBoxes:
     """Per-primitive swept, grown bounding boxes (layout in the module docstring).
 
@@ -110,6 +122,17 @@ class PrimitiveBoxes:
         self.edge_upper = wp.empty(edges.shape[0], dtype=wp.vec3, device=device)
         self.face_lower = wp.empty(faces.shape[0], dtype=wp.vec3, device=device)
         self.face_upper = wp.empty(faces.shape[0], dtype=wp.vec3, device=device)
+
+    def as_struct(self) -> PrimitiveBoxArgs:
+        """The six box arrays as one :class:`PrimitiveBoxArgs` kernel argument."""
+        boxes = PrimitiveBoxArgs()
+        boxes.vertex_lower = self.vertex_lower
+        boxes.vertex_upper = self.vertex_upper
+        boxes.edge_lower = self.edge_lower
+        boxes.edge_upper = self.edge_upper
+        boxes.face_lower = self.face_lower
+        boxes.face_upper = self.face_upper
+        return boxes
 
     @property
     def device_bytes(self) -> int:

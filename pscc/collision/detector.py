@@ -144,6 +144,7 @@ class CollisionDetector:
         self._positions_t0 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self._positions_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
+        self._feature_boxes = self.boxes.as_struct()
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
         if self.method == "brute-force":
@@ -233,7 +234,7 @@ class CollisionDetector:
             mark = time.perf_counter()
             x1_device = self._positions_t1 if x1 is not None else None
             self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
-                                       self._object_ids)
+                                       self._object_ids, self._feature_boxes)
             count = self.feature_pairs.kept_pairs
             self_pairs = self.feature_pairs.kept_self_pairs
             seconds["feature_pairs"] = time.perf_counter() - mark

@@ -26,8 +26,10 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.pair_filter import triangle_pair_separated
+from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.ccd import CcdParameters, ccd_parameters
 from pscc.mesh.topology import MeshTopology
 
@@ -59,8 +61,18 @@ def _edges_share_vertex(a: wp.vec2i, b: wp.vec2i) -> bool:
 
 
 @wp.func
+def _vertex_face_near(boxes: PrimitiveBoxArgs, v: int, f: int) -> bool:
+    return boxes_overlap(boxes.vertex_lower[v], boxes.vertex_upper[v], boxes.face_lower[f], boxes.face_upper[f])
+
+
+@wp.func
+def _edge_edge_near(boxes: PrimitiveBoxArgs, a: int, b: int) -> bool:
+    return boxes_overlap(boxes.edge_lower[a], boxes.edge_upper[a], boxes.edge_lower[b], boxes.edge_upper[b])
+
+
+@wp.func
 def _vertex_face_count(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
-                       owner: int, other: int) -> int:
+                       boxes: PrimitiveBoxArgs, owner: int, other: int) -> int:
     """Vertices owned by face ``owner`` that do not belong to face ``other``."""
     tri = faces[owner]
     target = faces[other]
@@ -68,14 +80,14 @@ def _vertex_face_count(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.ar
     count = int(0)
     for k in range(3):
         if (bits >> k) & 1:
-            if not _shares_vertex(target, tri[k]):
+            if not _shares_vertex(target, tri[k]) and _vertex_face_near(boxes, tri[k], other):
                 count += 1
     return count
 
 
 @wp.func
 def _vertex_face_fill(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
-                      owner: int, other: int, slot: int, out: wp.array(dtype=wp.vec2i)) -> int:
+                      boxes: PrimitiveBoxArgs, owner: int, other: int, slot: int, out: wp.array(dtype=wp.vec2i)) -> int:
     """Write (vertex, other) for the vertices counted by :func:`_vertex_face_count`; return the count."""
     tri = faces[owner]
     target = faces[other]
@@ -83,7 +95,7 @@ def _vertex_face_fill(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.arr
     count = int(0)
     for k in range(3):
         if (bits >> k) & 1:
-            if not _shares_vertex(target, tri[k]):
+            if not _shares_vertex(target, tri[k]) and _vertex_face_near(boxes, tri[k], other):
                 out[slot + count] = wp.vec2i(tri[k], other)
                 count += 1
     return count
@@ -112,6 +124,7 @@ def _count_features(
     owned_edge_bits: wp.array(dtype=wp.int32),
     triangle_pairs: wp.array(dtype=wp.vec2i),
     planes: PlaneTestArgs,
+    boxes: PrimitiveBoxArgs,
     # out:
     vertex_face_counts: wp.array(dtype=wp.int32),
     edge_edge_counts: wp.array(dtype=wp.int32),
@@ -131,7 +144,8 @@ def _count_features(
     wp.atomic_add(pair_stats, 0, 1)
     if planes.object_ids[a] == planes.object_ids[b]:
         wp.atomic_add(pair_stats, 1, 1)
-    vf = _vertex_face_count(faces, owned_vertex_bits, a, b) + _vertex_face_count(faces, owned_vertex_bits, b, a)
+    vf = _vertex_face_count(faces, owned_vertex_bits, boxes, a, b)
+    vf += _vertex_face_count(faces, owned_vertex_bits, boxes, b, a)
     ee = int(0)
     bits_a = owned_edge_bits[a]
     bits_b = owned_edge_bits[b]
@@ -139,7 +153,9 @@ def _count_features(
         if (bits_a >> j) & 1:
             for k in range(3):
                 if (bits_b >> k) & 1:
-                    if not _edges_share_vertex(edges[face_edges[a][j]], edges[face_edges[b][k]]):
+                    ea = face_edges[a][j]
+                    eb = face_edges[b][k]
+                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
                         ee += 1
     vertex_face_counts[i] = vf
     edge_edge_counts[i] = ee
@@ -154,6 +170,7 @@ def _fill_features(
     owned_vertex_bits: wp.array(dtype=wp.int32),
     owned_edge_bits: wp.array(dtype=wp.int32),
     triangle_pairs: wp.array(dtype=wp.vec2i),
+    boxes: PrimitiveBoxArgs,
     vertex_face_offsets: wp.array(dtype=wp.int32),
     edge_edge_offsets: wp.array(dtype=wp.int32),
     # out:
@@ -170,8 +187,8 @@ def _fill_features(
     a = pair[0]
     b = pair[1]
     slot = vertex_face_offsets[i]
-    slot += _vertex_face_fill(faces, owned_vertex_bits, a, b, slot, vertex_face_out)
-    _vertex_face_fill(faces, owned_vertex_bits, b, a, slot, vertex_face_out)
+    slot += _vertex_face_fill(faces, owned_vertex_bits, boxes, a, b, slot, vertex_face_out)
+    _vertex_face_fill(faces, owned_vertex_bits, boxes, b, a, slot, vertex_face_out)
     slot = edge_edge_offsets[i]
     bits_a = owned_edge_bits[a]
     bits_b = owned_edge_bits[b]
@@ -181,7 +198,7 @@ def _fill_features(
                 if (bits_b >> k) & 1:
                     ea = face_edges[a][j]
                     eb = face_edges[b][k]
-                    if not _edges_share_vertex(edges[ea], edges[eb]):
+                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
                         edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
                         slot += 1
 
@@ -236,6 +253,7 @@ class FeaturePairs:
         positions_t1: wp.array | None,
         thickness: float,
         object_ids: wp.array,
+        boxes: PrimitiveBoxArgs,
     ) -> None:
         """Write the feature pairs of the first ``pair_count`` triangle pairs into ``candidates``,
         skipping pairs that a supporting plane separates (:mod:`pscc.collision.pair_filter`).
@@ -248,6 +266,7 @@ class FeaturePairs:
             positions_t1: end of the step for CCD, else None.
             thickness: the distance the broad-phase boxes were grown by.
             object_ids: (face_count,) object of each face, for the self / inter pair counts.
+            boxes: the primitive boxes of the same call; feature pairs whose boxes miss are skipped.
 
         Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that passed.
         Reads the totals to the host (a sync point) to size the output exactly.
@@ -270,7 +289,7 @@ class FeaturePairs:
         if n > 0:
             wp.launch(_count_features, dim=n, device=self.device,
                       inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                              self.owned_edge_bits, triangle_pairs, planes],
+                              self.owned_edge_bits, triangle_pairs, planes, boxes],
                       outputs=[vf_counts, ee_counts, self.pair_stats])
         # Exclusive scan over n + 1 entries: the last offset is the total.
         wp.utils.array_scan(vf_counts[: n + 1], vf_offsets[: n + 1], inclusive=False)
@@ -284,6 +303,6 @@ class FeaturePairs:
         if n > 0:
             wp.launch(_fill_features, dim=n, device=self.device,
                       inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                              self.owned_edge_bits, triangle_pairs, vf_offsets, ee_offsets],
+                              self.owned_edge_bits, triangle_pairs, boxes, vf_offsets, ee_offsets],
                       outputs=[candidates.vertex_face, candidates.edge_edge])
         candidates.set_counts(total_vf, total_ee)

@@ -7,6 +7,7 @@ import warp as wp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.mesh import MeshTopology, grid_sheet
@@ -22,8 +23,12 @@ def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: st
     candidates = CandidatePairs(1, 1, wp.get_device(device))
     triangle_pairs = wp.array(pairs.reshape(-1, 2).astype(np.int32), dtype=wp.vec2i, device=device)
     x = np.zeros((vertex_count, 3), np.float32) if positions is None else positions
-    extractor.extract(triangle_pairs, len(pairs), candidates, wp.array(x, dtype=wp.vec3, device=device), None,
-                      thickness, wp.zeros(len(faces), dtype=wp.int32, device=device))
+    x_device = wp.array(x, dtype=wp.vec3, device=device)
+    boxes = PrimitiveBoxes(wp.array(faces, dtype=wp.vec3i, device=device),
+                           wp.array(topology.edges, dtype=wp.vec2i, device=device), vertex_count, wp.get_device(device))
+    boxes.compute(x_device, x_device, thickness)
+    extractor.extract(triangle_pairs, len(pairs), candidates, x_device, None, thickness,
+                      wp.zeros(len(faces), dtype=wp.int32, device=device), boxes.as_struct())
     assert extractor.kept_pairs == (len(pairs) if positions is None else extractor.kept_pairs)
     vf = candidates.vertex_face.numpy()[: candidates.vertex_face_count].reshape(-1, 2)
     ee = candidates.edge_edge.numpy()[: candidates.edge_edge_count].reshape(-1, 2)
