@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Run the pscc benchmarks and write BENCHMARKS.md.")
     parser.add_argument("--out", default="BENCHMARKS.md", help="report path (default BENCHMARKS.md)")
     parser.add_argument("--device", default=None, help="Warp device (default: Warp's default)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed repeats per measurement")
+    parser.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 4000, 16000],
                         help="triangle counts for the brute-force detector")
     parser.add_argument("--broad-phase-sizes", type=int, nargs="*", default=[50000, 200000],
