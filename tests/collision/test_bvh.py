@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import warp as wp
@@ -470,14 +468,12 @@ def test_invalid_input() -> None:
         MaterialBvh.build(faces, rest, ids, topology, rigid_objects=["x"])
 
 
-def test_build_time_is_reported(capsys: pytest.CaptureFixture[str]) -> None:
-    """Prints the build time of a 50K-triangle folded sheet; asserts no time (see docs/bvh.md)."""
+def test_large_folded_sheet() -> None:
+    """A 50K-triangle folded sheet builds a full binary tree whose internal nodes are all testable
+    (build times are measured in docs/bvh.md, not here)."""
     mesh = folded_sheet(50_000)
     topology = MeshTopology.from_faces(mesh.faces, mesh.vertex_count)
-    start = time.perf_counter()
     bvh = MaterialBvh.from_mesh(mesh, topology)
-    elapsed = time.perf_counter() - start
-    with capsys.disabled():
-        print(f"\nMaterialBvh.build: {mesh.face_count} faces, {bvh.node_count} nodes, {bvh.level_count} levels, "
-              f"{bvh.contour_vertices.size} contour vertices, {elapsed:.2f} s")
     assert bvh.node_count == 2 * mesh.face_count - 1
+    internal = ~bvh.is_leaf.astype(bool)
+    assert bvh.testable[internal].all()
