@@ -49,6 +49,11 @@ Bounds the depth of the search at 3 * 16 = 48 splits, so the fixed per-thread st
 CCD_STACK_SIZE: int = 64
 """Boxes on the per-thread depth-first stack of the CCD search (a compile-time constant)."""
 
+CCD_TOI_TOLERANCE: float = 2.0**-11
+"""Once a contact of a query is known, boxes that start less than this before it are not refined:
+the reported time of impact becomes their start. It stays a lower bound of the true first contact
+(never late) and is at most this much too early. Fraction of the step (about 4.9e-4)."""
+
 CCD_MAX_BOXES: int = 16384
 """Boxes one CCD query may examine; past this it stops and reports a collision at the earliest
 time not yet excluded (conservative: never a miss, never a late time of impact)."""

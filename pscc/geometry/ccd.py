@@ -59,6 +59,7 @@ class CcdParameters:
     comparison_margin: wp.float32
     max_boxes: wp.int32
     coplanarity_factor: wp.float32
+    toi_tolerance: wp.float32
 
 
 def ccd_parameters() -> CcdParameters:
@@ -70,6 +71,7 @@ def ccd_parameters() -> CcdParameters:
     params.comparison_margin = tolerances.DISTANCE_COMPARISON_MARGIN
     params.max_boxes = tolerances.CCD_MAX_BOXES
     params.coplanarity_factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
+    params.toi_tolerance = tolerances.CCD_TOI_TOLERANCE
     return params
 
 
@@ -228,6 +230,41 @@ def vertex_plane_side(
 
 
 @wp.func
+def _direction_separates(
+    d: wp.vec3,
+    f000: wp.vec3,
+    f010: wp.vec3,
+    f001: wp.vec3,
+    f011: wp.vec3,
+    f100: wp.vec3,
+    f110: wp.vec3,
+    f101: wp.vec3,
+    f111: wp.vec3,
+    lo: wp.vec3,
+    hi: wp.vec3,
+    err: wp.vec3,
+    minimum_distance: float,
+    params: CcdParameters,
+) -> bool:
+    """True when every corner projects onto ``d`` beyond ``minimum_distance |d|``, with bounds.
+
+    The exact corner values differ from the computed ones by at most ``err`` per axis, and each
+    computed projection (3 products, 2 sums) by at most 4 u times sum |d_k| max|f_k|; both are
+    subtracted before the comparison (4 u is written as 2^-22).
+    """
+    m = wp.min(wp.min(wp.min(wp.dot(d, f000), wp.dot(d, f010)), wp.min(wp.dot(d, f001), wp.dot(d, f011))),
+               wp.min(wp.min(wp.dot(d, f100), wp.dot(d, f110)), wp.min(wp.dot(d, f101), wp.dot(d, f111))))
+    if m <= 0.0:
+        return False
+    magnitude = wp.max(wp.abs(lo), wp.abs(hi))
+    slack = float(0.0)
+    for k in range(3):
+        slack += wp.abs(d[k]) * (err[k] + 2.384185791015625e-07 * magnitude[k])
+    bound = minimum_distance * wp.length(d) * (1.0 + params.comparison_margin)
+    return (m - slack) * (1.0 - params.comparison_margin) > bound
+
+
+@wp.func
 def _root_gap_squared(q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3,
                       err: wp.vec3) -> float:
     """Squared gap of the whole (t, u, v) in [0, 1]^3 box, evaluated exactly as the search does."""
@@ -295,6 +332,11 @@ def _ccd_search(
         v1 = stack_v1[count]
         if t0 >= best:
             continue
+        if best <= 1.0 and t0 >= best - params.toi_tolerance:
+            # A contact is already known; this box could only move it earlier by less than the
+            # time-of-impact tolerance, so report the box's start instead of refining it.
+            best = t0
+            continue
         # Only times before the best collision found so far still matter.
         t1 = wp.min(t1, best)
         if triangle_domain == 1 and u0 + v0 > 1.0:
@@ -331,6 +373,14 @@ def _ccd_search(
         gap_sq = _gap_squared(lo, hi, err)
         if gap_sq * (1.0 - params.comparison_margin) > ms_sq:
             continue  # certainly farther than d_min everywhere in this box
+        # The image of F over the box lies in the convex hull of its 8 corner values (F is
+        # multilinear), so any direction d whose corner projections all exceed d_min |d| separates
+        # the box from the origin. d = F at the box centre sees gaps along tilted directions that
+        # the axis-aligned test above misses.
+        d = 0.125 * (((f000 + f010) + (f001 + f011)) + ((f100 + f110) + (f101 + f111)))
+        if _direction_separates(d, f000, f010, f001, f011, f100, f110, f101, f111, lo, hi, err, minimum_distance,
+                                params):
+            continue
 
         width = hi - lo
         small = width[0] <= tolerance and width[1] <= tolerance and width[2] <= tolerance

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipctk
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -16,6 +17,35 @@ def _rows(result):
     return {tuple(int(x) for x in r) for r in result.vertex_face}, {tuple(int(x) for x in r) for r in result.edge_edge}
 
 
+_CCD_ORACLE = ipctk.TightInclusionCCD(tolerance=1e-9, max_iterations=1_000_000, conservative_rescaling=1.0)
+
+
+def _truly_touches(kind: str, row: tuple, faces: np.ndarray, x0: np.ndarray, x1, thickness: float) -> bool:
+    """Float64 ipctk decision for one reported row: does the pair really come within the thickness?"""
+    ids = [row[0], *faces[row[1]]] if kind == "vf" else list(row)
+    p0 = [np.float64(x0[i]) for i in ids]
+    if x1 is None:
+        d2 = ipctk.point_triangle_distance(*p0) if kind == "vf" else ipctk.edge_edge_distance(*p0)
+        return d2 <= thickness * thickness
+    p1 = [np.float64(x1[i]) for i in ids]
+    fn = _CCD_ORACLE.point_triangle_ccd if kind == "vf" else _CCD_ORACLE.edge_edge_ccd
+    return fn(*p0, *p1, min_distance=thickness)[0]
+
+
+def _assert_same_contacts(result, reference, faces, x0, x1=None, thickness: float = 0.0, label: str = "") -> None:
+    """``result`` is a subset of the conservative ``reference``, and every pair it lacks is a near
+    miss of the reference's tolerance band (float64 ipctk finds no contact), never a true contact.
+    (The hashed methods' box and plane tests are exact, so they drop near misses that the
+    reference's narrow phase reports.)"""
+    got_vf, got_ee = _rows(result)
+    ref_vf, ref_ee = _rows(reference)
+    assert got_vf <= ref_vf and got_ee <= ref_ee, f"{label}: pairs outside the reference"
+    for row in ref_vf - got_vf:
+        assert not _truly_touches("vf", row, faces, x0, x1, thickness), f"{label}: missed contact {row}"
+    for row in ref_ee - got_ee:
+        assert not _truly_touches("ee", row, faces, x0, x1, thickness), f"{label}: missed contact {row}"
+
+
 def _owners(faces: np.ndarray, vertex_count: int):
     topology = MeshTopology.from_faces(faces, vertex_count)
     vertex_owner = topology.vertex_face_indices[topology.vertex_face_offsets[:-1].clip(max=len(
@@ -28,8 +58,9 @@ def _owners(faces: np.ndarray, vertex_count: int):
 def _check_dcd_contract(faces, x, thickness, detectors):
     """spatial-hash == brute force; pscc is a subset whose missing pairs lie inside one front node."""
     reference_vf, reference_ee = _rows(detectors["brute-force"].detect(x, thickness=thickness))
-    hashed_vf, hashed_ee = _rows(detectors["spatial-hash"].detect(x, thickness=thickness))
-    assert hashed_vf == reference_vf and hashed_ee == reference_ee
+    _assert_same_contacts(detectors["spatial-hash"].detect(x, thickness=thickness),
+                          detectors["brute-force"].detect(x, thickness=thickness), faces, x, None, thickness,
+                          "spatial-hash")
     pscc = detectors["pscc"]
     culled_vf, culled_ee = _rows(pscc.detect(x, thickness=thickness))
     assert culled_vf <= reference_vf and culled_ee <= reference_ee
@@ -62,9 +93,12 @@ def test_ccd_equals_brute_force(maker: str) -> None:
     assert len(reference.vertex_face) + len(reference.edge_edge) > 0
     for method in ("spatial-hash", "pscc"):
         result = detectors[method].detect(mesh.vertices, mesh.vertices_end)
-        assert np.array_equal(result.vertex_face, reference.vertex_face), method
-        assert np.array_equal(result.edge_edge, reference.edge_edge), method
-        assert np.array_equal(result.vertex_face_toi, reference.vertex_face_toi), method
+        _assert_same_contacts(result, reference, mesh.faces, mesh.vertices, mesh.vertices_end, 0.0, method)
+        common = {tuple(r) for r in result.vertex_face}
+        toi_ref = {tuple(r): t for r, t in zip(reference.vertex_face, reference.vertex_face_toi, strict=True)}
+        for r, t in zip(result.vertex_face, result.vertex_face_toi, strict=True):
+            assert t == toi_ref[tuple(r)], "the narrow phase is deterministic per pair"
+        assert common
     pscc_stats = detectors["pscc"].detect(mesh.vertices, mesh.vertices_end).stats
     hash_stats = detectors["spatial-hash"].detect(mesh.vertices, mesh.vertices_end).stats
     assert pscc_stats["triangle_pairs"] < hash_stats["triangle_pairs"]
@@ -222,7 +256,7 @@ def test_certified_patches_never_hide_a_contact(shape: str, seed: int, motion: f
     for positions, end in ((x0, x1), (x1, None)):
         reference = detectors["brute-force"].detect(positions, end)
         result = detectors["pscc"].detect(positions, end)
-        assert _rows(result) == _rows(reference), f"{shape}: pscc differs from brute force"
+        _assert_same_contacts(result, reference, faces, positions, end, 0.0, shape)
 
 
 def test_non_manifold_fin_and_boundaries() -> None:
@@ -245,7 +279,7 @@ def test_non_manifold_fin_and_boundaries() -> None:
     reference = detectors["brute-force"].detect(all_vertices, moved)
     result = detectors["pscc"].detect(all_vertices, moved)
     assert len(reference.vertex_face) + len(reference.edge_edge) > 0
-    assert _rows(result) == _rows(reference)
+    _assert_same_contacts(result, reference, all_faces, all_vertices, moved, 0.0, "fin")
 
 
 def test_reused_broad_phase_serves_ccd_and_next_dcd() -> None:
@@ -257,9 +291,11 @@ def test_reused_broad_phase_serves_ccd_and_next_dcd() -> None:
         ccd = det.narrow_phase(mesh.vertices, mesh.vertices_end)
         dcd = det.narrow_phase(mesh.vertices_end, thickness=h)
         fresh = CollisionDetector(mesh.faces, method="brute-force")
-        assert _rows(ccd) == _rows(fresh.detect(mesh.vertices, mesh.vertices_end))
+        _assert_same_contacts(ccd, fresh.detect(mesh.vertices, mesh.vertices_end), mesh.faces, mesh.vertices,
+                              mesh.vertices_end, 0.0, method)
         reference_dcd = _rows(fresh.detect(mesh.vertices_end, thickness=h))
         if method == "spatial-hash":
-            assert _rows(dcd) == reference_dcd
+            _assert_same_contacts(dcd, fresh.detect(mesh.vertices_end, thickness=h), mesh.faces, mesh.vertices_end,
+                                  None, h, method)
         else:
             assert _rows(dcd)[0] <= reference_dcd[0] and _rows(dcd)[1] <= reference_dcd[1]
