@@ -457,6 +457,32 @@ def _query_error(scale_axes: wp.vec3, extra_error: float, params: CcdParameters)
 
 
 @wp.func
+def _ccd_from_differences(
+    q0: wp.vec3,
+    e10: wp.vec3,
+    e20: wp.vec3,
+    q1: wp.vec3,
+    e11: wp.vec3,
+    e21: wp.vec3,
+    triangle_domain: int,
+    magnitude: wp.vec3,
+    extra_error: float,
+    minimum_distance: float,
+    params: CcdParameters,
+) -> float:
+    """Shared tail of the two CCD functions: rounding bound, coplanarity filter, then the search.
+
+    ``magnitude`` is the per-axis largest |translated coordinate| of the query (M in the bound).
+    """
+    err = _query_error(magnitude, extra_error, params)
+    scale = wp.max(magnitude[0], wp.max(magnitude[1], magnitude[2]))
+    if minimum_distance == 0.0 and extra_error == 0.0:
+        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
+            return 2.0
+    return _ccd_search(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance, params)
+
+
+@wp.func
 def vertex_face_ccd_toi(
     p_t0: wp.vec3,
     a_t0: wp.vec3,
@@ -495,18 +521,8 @@ def vertex_face_ccd_toi(
     m = _abs_max(m, ya1)
     m = _abs_max(m, yb1)
     m = _abs_max(m, yc1)
-    err = _query_error(m, extra_error, params)
-    scale = wp.max(m[0], wp.max(m[1], m[2]))
-    q0 = yp0 - ya0
-    e10 = ya0 - yb0
-    e20 = ya0 - yc0
-    q1 = yp1 - ya1
-    e11 = ya1 - yb1
-    e21 = ya1 - yc1
-    if minimum_distance == 0.0 and extra_error == 0.0:
-        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
-            return 2.0
-    return _ccd_search(q0, e10, e20, q1, e11, e21, 1, err, scale, minimum_distance, params)
+    return _ccd_from_differences(yp0 - ya0, ya0 - yb0, ya0 - yc0, yp1 - ya1, ya1 - yb1, ya1 - yc1, 1, m,
+                                 extra_error, minimum_distance, params)
 
 
 @wp.func
@@ -546,18 +562,8 @@ def edge_edge_ccd_toi(
     m = _abs_max(m, ya11)
     m = _abs_max(m, yb01)
     m = _abs_max(m, yb11)
-    err = _query_error(m, extra_error, params)
-    scale = wp.max(m[0], wp.max(m[1], m[2]))
-    q0 = ya00 - yb00
-    e10 = ya10 - ya00
-    e20 = yb00 - yb10
-    q1 = ya01 - yb01
-    e11 = ya11 - ya01
-    e21 = yb01 - yb11
-    if minimum_distance == 0.0 and extra_error == 0.0:
-        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
-            return 2.0
-    return _ccd_search(q0, e10, e20, q1, e11, e21, 0, err, scale, minimum_distance, params)
+    return _ccd_from_differences(ya00 - yb00, ya10 - ya00, yb00 - yb10, ya01 - yb01, ya11 - ya01, yb01 - yb11, 0,
+                                 m, extra_error, minimum_distance, params)
 
 
 @wp.kernel
