@@ -172,6 +172,9 @@ class CollisionDetector:
     def _inputs(self, positions: Any, positions_end: Any, thickness: float) -> tuple[np.ndarray, Any, float]:
         x0 = self._positions(positions, "positions")
         x1 = None if positions_end is None else self._positions(positions_end, "positions_end")
+        if x1 is not None and x1.shape != x0.shape:
+            raise InputError("argument", "positions_end", f"shape {x1.shape} differs from positions {x0.shape}",
+                             "pass end positions of the same vertices")
         h = check_nonnegative(thickness, "thickness")
         if self.topology is None:
             self._setup(x0.shape[0], x0)
@@ -191,8 +194,15 @@ class CollisionDetector:
             Broad-phase stats: ``bv_tests``, ``box_pairs`` (hashed methods: triangle pairs whose boxes
             overlap), ``triangle_pairs`` (after the supporting-plane test), ``self_triangle_pairs``,
             ``inter_triangle_pairs``, ``front_size``, ``candidate_pairs`` and ``seconds``.
+
+        Raises:
+            InputError: bad positions or thickness.
         """
         x0, x1, h = self._inputs(positions, positions_end, thickness)
+        return self._broad(x0, x1, h)
+
+    def _broad(self, x0: np.ndarray, x1: np.ndarray | None, h: float) -> dict[str, Any]:
+        """Broad phase on validated float32 positions (see :meth:`broad_phase`)."""
         seconds: dict[str, float] = {}
         mark = time.perf_counter()
         self._positions_t0.assign(x0)
@@ -247,6 +257,7 @@ class CollisionDetector:
         stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
         stats["seconds"] = seconds
         self._broad_mode = "ccd" if x1 is not None else "dcd"
+        self._broad_thickness = h
         self._broad_stats = stats
         return stats
 
@@ -254,17 +265,34 @@ class CollisionDetector:
         """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
 
         The caller is responsible for the candidates covering these positions: boxes of the
-        broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it).
+        broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it: CCD
+        over the same step, then DCD at its end positions).
+
+        Raises:
+            InputError: no broad phase has run, CCD after a discrete broad phase, or a thickness
+                larger than the broad phase's (its candidates would not cover the query).
         """
         if self._broad_mode is None:
             raise InputError("argument", "narrow_phase", "no broad phase has run", "call broad_phase() first")
         x0, x1, h = self._inputs(positions, positions_end, thickness)
+        if x1 is not None and self._broad_mode == "dcd":
+            raise InputError("argument", "positions_end", "the last broad phase was discrete (no end positions)",
+                             "run broad_phase(positions, positions_end, thickness) before a CCD narrow phase")
+        if h > self._broad_thickness:
+            raise InputError("argument", "thickness",
+                             f"{h:g} exceeds the broad phase's thickness {self._broad_thickness:g}",
+                             "run broad_phase() with at least the thickness the narrow phase uses")
+        return self._narrow(x0, x1, h, upload=True)
+
+    def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool) -> CollisionResult:
+        """Narrow phase on the current candidates; ``upload=False`` reuses the positions the broad
+        phase just copied to the device."""
         mark = time.perf_counter()
-        self._positions_t0.assign(x0)
-        positions_t1 = self._positions_t0
-        if x1 is not None:
-            self._positions_t1.assign(x1)
-            positions_t1 = self._positions_t1
+        if upload:
+            self._positions_t0.assign(x0)
+            if x1 is not None:
+                self._positions_t1.assign(x1)
+        positions_t1 = self._positions_t1 if x1 is not None else self._positions_t0
         self.narrow.run(self.candidates, self._positions_t0, positions_t1, h)
         wp.synchronize_device(self.device)
         narrow_seconds = time.perf_counter() - mark
@@ -292,12 +320,9 @@ class CollisionDetector:
         """
         started = time.perf_counter()
         x0, x1, h = self._inputs(positions, positions_end, thickness)
-        if x1 is not None and x1.shape != x0.shape:
-            raise InputError("argument", "positions_end", f"shape {x1.shape} differs from positions {x0.shape}",
-                             "pass end positions of the same vertices")
         setup = time.perf_counter() - started
-        broad = self.broad_phase(x0, x1, h)
-        result = self.narrow_phase(x0, x1, h)
+        broad = self._broad(x0, x1, h)
+        result = self._narrow(x0, x1, h, upload=False)
         seconds = {"setup": setup, **broad["seconds"], "narrow_phase": result.stats["narrow_phase"],
                    "output": result.stats["output"]}
         seconds["total"] = time.perf_counter() - started

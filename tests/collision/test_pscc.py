@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.feature_pairs import ownership_bits
+from pscc.errors import InputError
 from pscc.mesh import MeshTopology, folded_sheet, grid_sheet, twisted_sheet
 
 
@@ -313,3 +314,18 @@ def test_reused_broad_phase_serves_ccd_and_next_dcd() -> None:
                                   None, h, method)
         else:
             assert _rows(dcd)[0] <= reference_dcd[0] and _rows(dcd)[1] <= reference_dcd[1]
+
+
+def test_narrow_phase_refuses_uncovered_queries() -> None:
+    mesh = folded_sheet(300, layers=2, seed=6)
+    det = CollisionDetector(mesh.faces, rest=mesh.rest)
+    with pytest.raises(InputError, match="broad phase"):
+        det.narrow_phase(mesh.vertices)
+    det.broad_phase(mesh.vertices, thickness=0.01)
+    with pytest.raises(InputError, match="positions_end"):
+        det.narrow_phase(mesh.vertices, mesh.vertices_end)
+    with pytest.raises(InputError, match="thickness"):
+        det.narrow_phase(mesh.vertices, thickness=0.02)
+    det.narrow_phase(mesh.vertices, thickness=0.005)
+    with pytest.raises(InputError, match="positions_end"):
+        CollisionDetector(mesh.faces).broad_phase(mesh.vertices, mesh.vertices_end[:-1])
