@@ -322,7 +322,6 @@ def _test_bounding_volumes(
     # in:
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
-    node_id: wp.array(dtype=wp.int32),
     faces: wp.array(dtype=wp.vec3i),
     skip_adjacent: int,
     grid: GridArgs,
@@ -339,33 +338,42 @@ def _test_bounding_volumes(
     onwards, ``tests_per_thread`` of them (1 = one thread per BV test). Every thread gets the same
     amount of work; consecutive tests walk along the rows of the workload table, so a batch needs
     one binary search."""
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    entry_face = tables.entry_face
+    entry_key = tables.entry_key
+    group_starts = tables.group_start
+    group_ends = tables.group_end
+    group_cell = tables.group_cell
+    cell_ends = tables.cell_end
+    row_work = tables.row_work
+    row_scan = tables.row_scan
     k = first_test + wp.int64(wp.tid()) * wp.int64(tests_per_thread)
     if k >= end_test:
         return
-    g = _find_row(tables.row_scan, tables.group_count, k)
-    q = k - (tables.row_scan[g] - tables.row_work[g])
-    # Per-row values, reloaded only when the walk enters the next row.
-    rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
-    row_cell = key_cell(tables.entry_key[tables.group_start[g]])
-    current_a = int(-1)
-    fa = int(0)
-    node_a = int(0)
-    lower_a = wp.vec3(0.0, 0.0, 0.0)
-    upper_a = wp.vec3(0.0, 0.0, 0.0)
+    g = _find_row(row_scan, tables.group_count, k)
+    q = k - (row_scan[g] - row_work[g])
+    # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row g at
+    # offset q is entry a = group_start + q / rest against entry b = group_end + q % rest; the walk
+    # keeps both indices and divides only once per thread.
+    rest = wp.int64(cell_ends[group_cell[g]] - group_ends[g])
+    entry_a = group_starts[g] + int(q // rest)
+    entry_b = group_ends[g] + int(q % rest)
+    row_key = entry_key[group_starts[g]]
+    row_cell = key_cell(row_key)
+    group_end = group_ends[g]
+    cell_end = cell_ends[group_cell[g]]
+    last_a = group_ends[g]
+    fa = entry_face[entry_a]
+    lower_a = face_lower[fa]
+    upper_a = face_upper[fa]
     for _step in range(tests_per_thread):
         if k >= end_test:
             break
-        entry_a = tables.group_start[g] + int(q // rest)
-        if entry_a != current_a:
-            current_a = entry_a
-            fa = tables.entry_face[entry_a]
-            node_a = node_id[fa]
-            lower_a = face_lower[fa]
-            upper_a = face_upper[fa]
-        fb = tables.entry_face[tables.group_end[g] + int(q % rest)]
+        fb = entry_face[entry_b]
         emit = True
-        if node_a == node_id[fb]:
-            # Cannot happen: later groups of a cell have other node ids. Counted so tests can assert it.
+        if entry_key[entry_b] == row_key:
+            # Cannot happen: later groups of a cell have other keys (other node ids). Counted so tests
+            # can assert it.
             wp.atomic_add(counts, 1, wp.int64(1))
             emit = False
         if emit:
@@ -387,16 +395,27 @@ def _test_bounding_volumes(
                 if slot < capacity:
                     pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
         k += wp.int64(1)
-        q += wp.int64(1)
-        if q >= tables.row_work[g]:
-            # Next row with work (rows of groups that are last in their cell have none).
-            g += 1
-            while g < tables.group_count - 1 and tables.row_work[g] == wp.int64(0):
+        entry_b += 1
+        if entry_b == cell_end:
+            entry_b = group_end
+            entry_a += 1
+            if entry_a == last_a:
+                # Next row with work (rows of groups that are last in their cell have none).
+                if k >= end_test:
+                    break
                 g += 1
-            q = wp.int64(0)
-            rest = wp.int64(tables.cell_end[tables.group_cell[g]] - tables.group_end[g])
-            row_cell = key_cell(tables.entry_key[tables.group_start[g]])
-            current_a = -1
+                while g < tables.group_count - 1 and row_work[g] == wp.int64(0):
+                    g += 1
+                entry_a = group_starts[g]
+                group_end = group_ends[g]
+                last_a = group_end
+                entry_b = group_end
+                cell_end = cell_ends[group_cell[g]]
+                row_key = entry_key[entry_a]
+                row_cell = key_cell(row_key)
+            fa = entry_face[entry_a]
+            lower_a = face_lower[fa]
+            upper_a = face_upper[fa]
 
 
 @wp.kernel

@@ -140,8 +140,8 @@ class SpatialHash:
         pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
         tests_per_launch: BV tests per launch of the test kernel.
         tests_per_thread: BV tests each thread of the test kernel runs back to back. ``None``: 1 on
-            a GPU (the paper's one thread per BV test) and 16 on the CPU, whose kernel threads run
-            one after the other (one binary search per 16 tests instead of per test). Either way
+            a GPU (the paper's one thread per BV test) and 64 on the CPU, whose kernel threads run
+            one after the other (one binary search per 64 tests instead of per test). Either way
             every thread gets the same amount of work.
         sort_pairs: sort the emitted pairs by (a, b) (deterministic order on every device). Without
             sorting, the order follows the atomic appends (deterministic on the CPU only) and the
@@ -178,7 +178,7 @@ class SpatialHash:
                              "pass a non-negative integer or None")
         self.device = wp.get_device(device)
         if tests_per_thread is None:
-            tests_per_thread = 1 if self.device.is_cuda else 16
+            tests_per_thread = 1 if self.device.is_cuda else 64
         if isinstance(tests_per_thread, bool) or not isinstance(tests_per_thread, int) or tests_per_thread < 1:
             raise InputError("argument", "tests_per_thread", f"{tests_per_thread!r} is not an integer >= 1",
                              "pass a positive integer or None")
@@ -340,7 +340,7 @@ class SpatialHash:
         grid.origin = wp.vec3(*origin)
         entries = self._insert_faces(face_lower, face_upper, node_id, grid, cell_size, extent)
         self._build_tables(entries)
-        self._test_pairs(face_lower, face_upper, node_id, grid, entries)
+        self._test_pairs(face_lower, face_upper, grid)
         if self.sort_pairs:
             self._sort_pairs()
         self.stats.mean_cells_per_face = entries / self.face_count
@@ -449,9 +449,7 @@ class SpatialHash:
         self.stats.cells = int(info[1])
         self.stats.bv_tests = int(info[2])
 
-    def _test_pairs(
-        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, grid: kernels.GridArgs, entries: int
-    ) -> None:
+    def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, grid: kernels.GridArgs) -> None:
         """One thread per BV test, in batches; grows the pair buffer and re-runs on overflow. Sync point 4."""
         tables = kernels.TableArgs()
         tables.entry_key = self.entry_key
@@ -471,7 +469,7 @@ class SpatialHash:
                 end = min(total, first + self.tests_per_launch)
                 threads = (end - first + per_thread - 1) // per_thread
                 wp.launch(kernels._test_bounding_volumes, dim=threads,
-                          inputs=[face_lower, face_upper, node_id, self.faces, int(self.skip_adjacent), grid,
+                          inputs=[face_lower, face_upper, self.faces, int(self.skip_adjacent), grid,
                                   tables, first, end, per_thread, self.pair_capacity],
                           outputs=[self.counts, self.pairs], device=self.device)
             counts = self.counts.numpy()
