@@ -286,3 +286,49 @@ def twisted_sheet(
     return validate_mesh(vertices, faces, vertices_end=vertices_end, rest=rest,
                          source=f"twisted_sheet(triangle_count={triangle_count}, turns={turns}, "
                                 f"seed={int(seed)})")
+
+
+def icosphere(radius: float = 1.0, subdivisions: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A closed sphere mesh centred at the origin: an icosahedron split ``subdivisions`` times.
+
+    Each split cuts every triangle into four and pushes the new vertices onto the sphere, so the
+    mesh has 20 * 4**subdivisions faces, outward-facing (counter-clockwise seen from outside).
+
+    Args:
+        radius: Sphere radius (> 0).
+        subdivisions: Number of 1-to-4 splits (0 to 7).
+
+    Returns:
+        ``(vertices, faces)``: (n, 3) float32 and (m, 3) int32.
+
+    Raises:
+        InputError: a non-positive radius or a subdivision count outside [0, 7].
+    """
+    radius = _check_positive(radius, "radius")
+    if isinstance(subdivisions, bool) or not isinstance(subdivisions, int | np.integer) or not 0 <= subdivisions <= 7:
+        raise InputError("argument", "subdivisions", f"{subdivisions!r} is not an integer in [0, 7]",
+                         "pass 0 to 7 (20 * 4**s faces)")
+    phi = (1.0 + math.sqrt(5.0)) / 2.0
+    points = [(-1, phi, 0), (1, phi, 0), (-1, -phi, 0), (1, -phi, 0), (0, -1, phi), (0, 1, phi),
+              (0, -1, -phi), (0, 1, -phi), (phi, 0, -1), (phi, 0, 1), (-phi, 0, -1), (-phi, 0, 1)]
+    vertices = [np.array(p, dtype=np.float64) / np.linalg.norm(p) for p in points]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
+             (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(int(subdivisions)):
+        midpoint: dict[tuple[int, int], int] = {}
+
+        def middle(a: int, b: int) -> int:
+            key = (min(a, b), max(a, b))
+            if key not in midpoint:
+                point = vertices[a] + vertices[b]
+                vertices.append(point / np.linalg.norm(point))
+                midpoint[key] = len(vertices) - 1
+            return midpoint[key]
+
+        split = []
+        for a, b, c in faces:
+            ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
+            split += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = split
+    return (np.asarray(vertices) * radius).astype(np.float32), np.asarray(faces, dtype=np.int32)

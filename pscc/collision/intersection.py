@@ -1,0 +1,380 @@
+"""Discrete intersection check of a triangle soup: which mesh edges cross which triangles.
+
+An *intersection* is a mesh edge meeting a triangle it shares no vertex with (touching counts),
+the definition of ipctk's ``has_intersections``. The cloth simulator calls
+:class:`IntersectionCheck` on every output frame as a safety net, so the test is conservative:
+every intersecting (edge, face) pair is reported, and a reported pair that does not intersect
+lies within a certified float32 distance bound of the face (:mod:`pscc.geometry.segment_triangle`).
+
+Pipeline of :meth:`IntersectionCheck.find`:
+
+1. exact per-face boxes (min / max of the float32 corners: no rounding, so an intersecting
+   pair always has overlapping closed boxes);
+2. :class:`~pscc.collision.spatial_hash.SpatialHash` over the boxes, every face its own node (plain
+   spatial hashing; pairs sharing a vertex are kept, since their other edges can still cross);
+3. one thread per face pair ``(g, f)``: the 3 + 3 edges of one face against the other face,
+   skipping edges that share a vertex with that face. Edge ``e`` is tested only from its owner,
+   the lowest-id face containing it (``edge_owner``), so each (edge, face) pair is tested and
+   reported once (an edge inside a face's box makes every face of that edge overlap the box);
+4. hits are appended with an atomic counter to a buffer that grows to the exact count and
+   re-runs the test pass when it overflows (no silent loss), then sorted on the host.
+
+Device buffers of :class:`IntersectionCheck` (m faces, n vertices, E edges, H hit slots):
+
+=======================  ====================  =================================================
+buffer                   shape, dtype          meaning
+=======================  ====================  =================================================
+faces                    (m,) vec3i            vertex ids of each face
+face_edges               (m,) vec3i            edge ids of (v0, v1), (v1, v2), (v2, v0)
+edges                    (E,) vec2i            edge vertex ids ``[a, b]``, ``a < b``, sorted
+edge_owner               (E,) int32            lowest face id containing the edge
+positions                (n,) vec3             copy of NumPy positions passed to ``find``
+face_lower / face_upper  (m,) vec3             exact face boxes
+hits                     (H,) vec2i            reported (edge id, face id), unsorted
+hit_kind / hit_bound     (H,) int32 / float32  1 certain crossing, 2 near; distance bound Delta
+hit_count                (1,) int64            hits found (may exceed H: then H grows)
+=======================  ====================  =================================================
+
+Sync points of :meth:`IntersectionCheck.find` (host reads of device data): the four of
+:meth:`SpatialHash.find_pairs` (scene bounds, entry count, table counts, pair count), then the hit
+count, then the copy of the hits to the host.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from pscc._checks import check_points
+from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
+from pscc.errors import CapacityError, InputError
+from pscc.geometry.segment_triangle import segment_triangle_classify
+from pscc.mesh.topology import MeshTopology
+
+wp.set_module_options({"enable_backward": False})
+
+MAX_HITS: int = 2**31 - 1
+"""Most (edge, face) hits one call can report (int32 slot indices)."""
+
+_GROWTH: float = 1.25
+"""A grown hit buffer gets this factor over the exact count."""
+
+
+@dataclass
+class IntersectionStats:
+    """Counters of the last :meth:`IntersectionCheck.find` call.
+
+    Attributes:
+        face_pairs: face pairs from the broad phase (closed boxes overlap).
+        hits: reported (edge, face) pairs.
+        crossings: hits that are certain proper crossings.
+        near: hits reported because float32 could not exclude them (within their bound).
+        max_near_bound: largest certified distance bound among the near hits (length units).
+        reruns: times the test pass ran again after the hit buffer grew.
+    """
+
+    face_pairs: int = 0
+    hits: int = 0
+    crossings: int = 0
+    near: int = 0
+    max_near_bound: float = 0.0
+    reruns: int = 0
+
+
+@wp.kernel
+def _compute_exact_face_boxes(
+    # in:
+    faces: wp.array(dtype=wp.vec3i),
+    positions: wp.array(dtype=wp.vec3),
+    # out:
+    lower_out: wp.array(dtype=wp.vec3),
+    upper_out: wp.array(dtype=wp.vec3),
+):
+    """One thread per face: componentwise min / max of its three corners (exact)."""
+    i = wp.tid()
+    f = faces[i]
+    a = positions[f[0]]
+    b = positions[f[1]]
+    c = positions[f[2]]
+    lower_out[i] = wp.min(wp.min(a, b), c)
+    upper_out[i] = wp.max(wp.max(a, b), c)
+
+
+@wp.kernel
+def _test_face_pairs(
+    # in:
+    faces: wp.array(dtype=wp.vec3i),
+    face_edges: wp.array(dtype=wp.vec3i),
+    edges: wp.array(dtype=wp.vec2i),
+    edge_owner: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.vec3),
+    face_pairs: wp.array(dtype=wp.vec2i),
+    capacity: int,
+    # out:
+    hit_count: wp.array(dtype=wp.int64),
+    hits: wp.array(dtype=wp.vec2i),
+    hit_kind: wp.array(dtype=wp.int32),
+    hit_bound: wp.array(dtype=float),
+):
+    """One thread per face pair: owned edges of each face against the other face."""
+    i = wp.tid()
+    pair = face_pairs[i]
+    for side in range(2):
+        g = pair[side]
+        f = pair[1 - side]
+        fv = faces[f]
+        fe = face_edges[g]
+        for k in range(3):
+            e = fe[k]
+            if edge_owner[e] != g:
+                continue
+            ev = edges[e]
+            if ev[0] == fv[0] or ev[0] == fv[1] or ev[0] == fv[2] or ev[1] == fv[0] or ev[1] == fv[1] or ev[1] == fv[2]:
+                continue
+            r = segment_triangle_classify(positions[ev[0]], positions[ev[1]],
+                                          positions[fv[0]], positions[fv[1]], positions[fv[2]])
+            if r[0] > 0.5:
+                slot = wp.atomic_add(hit_count, 0, wp.int64(1))
+                if slot < wp.int64(capacity):
+                    s = int(slot)
+                    hits[s] = wp.vec2i(e, f)
+                    hit_kind[s] = int(r[0] + 0.5)
+                    hit_bound[s] = r[1]
+
+
+class IntersectionCheck:
+    """Conservative discrete intersection check of one triangle soup (cloth and obstacles together).
+
+    Callers concatenate their meshes into one index space (offset the faces of each mesh by the
+    vertices before it) and may tag each face with an object id to learn which objects are
+    involved (:meth:`object_pairs`). Buffer layout and pipeline in the module docstring.
+
+    Args:
+        faces: (face_count, 3) integer vertex ids; the three ids of a face must differ.
+        vertex_count: number of vertices n (positions passed later have n rows).
+        device: Warp device (``None``: the default device).
+        object_ids: (face_count,) integer object id per face, or ``None`` (all 0).
+        cell_size_factor: spatial hash cell size over the mean face box size.
+        hit_capacity: initial hit slots (default 64); grown to the exact need.
+
+    Raises:
+        InputError: invalid faces, vertex count, object ids or options.
+
+    Allocates: yes (every buffer at its initial capacity). Capture-safe: no.
+    """
+
+    def __init__(
+        self,
+        faces: np.ndarray,
+        vertex_count: int,
+        device: wp.Device | str | None = None,
+        *,
+        object_ids: np.ndarray | None = None,
+        cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
+        hit_capacity: int = 64,
+    ) -> None:
+        if isinstance(vertex_count, bool) or not isinstance(vertex_count, int | np.integer) or vertex_count < 0:
+            raise InputError("argument", "vertex_count", f"{vertex_count!r} is not an integer >= 0",
+                             "pass the number of vertices")
+        if isinstance(hit_capacity, bool) or not isinstance(hit_capacity, int | np.integer) or hit_capacity < 1:
+            raise InputError("argument", "hit_capacity", f"{hit_capacity!r} is not an integer >= 1",
+                             "pass a positive integer such as 64")
+        topology = MeshTopology.from_faces(faces, int(vertex_count))
+        tris = np.asarray(faces).reshape(-1, 3).astype(np.int32)
+        m = tris.shape[0]
+        if object_ids is None:
+            objects = np.zeros(m, dtype=np.int32)
+        else:
+            objects = np.asarray(object_ids)
+            if objects.shape != (m,) or objects.dtype.kind not in "iu":
+                raise InputError("argument", "object_ids", f"shape {objects.shape} dtype {objects.dtype} is not "
+                                 f"({m},) integer", "pass one integer object id per face")
+            objects = objects.astype(np.int32)
+        self.device = wp.get_device(device)
+        self.vertex_count = int(vertex_count)
+        self.face_count = m
+        self.topology = topology
+        self.object_ids = objects
+        edge_count = topology.edge_count
+        owner = topology.edge_face_indices[topology.edge_face_offsets[:-1]] if edge_count else np.zeros(0, np.int32)
+        self._edge_owner_np = owner.astype(np.int32)
+
+        dev = self.device
+        self.faces = wp.array(tris, dtype=wp.vec3i, device=dev)
+        self.face_edges = wp.array(topology.face_edges.reshape(-1, 3), dtype=wp.vec3i, device=dev)
+        self.edges = wp.array(topology.edges.reshape(-1, 2), dtype=wp.vec2i, device=dev)
+        self.edge_owner = wp.array(self._edge_owner_np, dtype=wp.int32, device=dev)
+        self.positions = wp.empty(self.vertex_count, dtype=wp.vec3, device=dev)
+        self.face_lower = wp.empty(m, dtype=wp.vec3, device=dev)
+        self.face_upper = wp.empty(m, dtype=wp.vec3, device=dev)
+        self.hit_count = wp.zeros(1, dtype=wp.int64, device=dev)
+        self._allocate_hits(int(hit_capacity))
+        self.spatial_hash = SpatialHash(m, dev, cell_size_factor, sort_pairs=False)
+        self.stats = IntersectionStats()
+        self._kinds = np.zeros(0, dtype=np.int32)
+        self._bounds = np.zeros(0, dtype=np.float32)
+
+    def _allocate_hits(self, capacity: int) -> None:
+        self.hit_capacity = capacity
+        self.hits = wp.empty(capacity, dtype=wp.vec2i, device=self.device)
+        self.hit_kind = wp.empty(capacity, dtype=wp.int32, device=self.device)
+        self.hit_bound = wp.empty(capacity, dtype=float, device=self.device)
+
+    @property
+    def edge_vertices(self) -> np.ndarray:
+        """(edge_count, 2) int32 vertex ids of each edge (the edge ids that :meth:`find` reports)."""
+        return self.topology.edges
+
+    @property
+    def edge_owner_faces(self) -> np.ndarray:
+        """(edge_count,) int32 lowest face id containing each edge (its object is the edge's object)."""
+        return self._edge_owner_np
+
+    def _upload(self, positions: object) -> wp.array:
+        """Validated device positions: a matching ``wp.array`` as is, anything else copied."""
+        n = self.vertex_count
+        if isinstance(positions, wp.array):
+            if positions.dtype != wp.vec3 or positions.ndim != 1 or positions.shape[0] != n:
+                raise InputError("argument", "positions", f"got a {positions.shape} array of "
+                                 f"{wp.types.type_repr(positions.dtype)}", f"pass a ({n},) wp.array of vec3")
+            if positions.device != self.device:
+                raise InputError("argument", "positions", f"array is on {positions.device}, the check on "
+                                 f"{self.device}", f"copy it to {self.device} first")
+            if not positions.is_contiguous:
+                raise InputError("argument", "positions", "array is not contiguous", "pass a contiguous array")
+            return positions
+        host = check_points(positions, "positions", shape_tail=(3,))
+        if host.shape[0] != n:
+            raise InputError("argument", "positions", f"{host.shape[0]} rows for {n} vertices",
+                             f"pass ({n}, 3) positions")
+        if n:
+            self.positions.assign(host)
+        return self.positions
+
+    def _run(self, positions: object) -> int:
+        """Broad phase and test pass; returns the exact hit count (sync points in the module docstring)."""
+        self.stats = IntersectionStats()
+        points = self._upload(positions)
+        m = self.face_count
+        if m < 2:
+            return 0
+        dev = self.device
+        wp.launch(_compute_exact_face_boxes, dim=m, inputs=[self.faces, points],
+                  outputs=[self.face_lower, self.face_upper], device=dev)
+        pairs, pair_count = self.spatial_hash.find_pairs(self.face_lower, self.face_upper)
+        self.stats.face_pairs = pair_count
+        if pair_count == 0:
+            return 0
+        while True:
+            self.hit_count.zero_()
+            wp.launch(_test_face_pairs, dim=pair_count,
+                      inputs=[self.faces, self.face_edges, self.edges, self.edge_owner, points, pairs,
+                              self.hit_capacity],
+                      outputs=[self.hit_count, self.hits, self.hit_kind, self.hit_bound], device=dev)
+            found = int(self.hit_count.numpy()[0])
+            if found <= self.hit_capacity:
+                return found
+            if found > MAX_HITS:
+                raise CapacityError(f"intersection hit buffer: {found} hits exceed {MAX_HITS}; "
+                                    "the mesh is massively self-intersecting")
+            self._allocate_hits(min(MAX_HITS, int(found * _GROWTH) + 1))
+            self.stats.reruns += 1
+
+    def find(self, positions: object) -> np.ndarray:
+        """All reported (edge id, face id) pairs: the edge meets the face or is within its bound of it.
+
+        Every intersecting pair is reported (no false negatives); a reported pair that does not
+        intersect is within the certified distance bound of :mod:`pscc.geometry.segment_triangle`
+        (see :meth:`details`). Edge ids index :attr:`edge_vertices`.
+
+        Sync points: the four of the spatial hash, the hit count and the copy of the hits.
+
+        Args:
+            positions: (vertex_count, 3) float positions (NumPy or nested lists, converted to float32
+                and copied to the device) or a (vertex_count,) ``wp.vec3`` array on the check's device
+                (used in place; must be finite).
+
+        Returns:
+            (k, 2) int32 array of (edge id, face id) rows, each pair once, sorted lexicographically.
+
+        Raises:
+            InputError: wrong shape, dtype or device, NaN or Inf.
+            CapacityError: more hits than int32 slots.
+
+        Allocates: when the hit buffer or the spatial hash grows, and the host result. Capture-safe: no.
+        """
+        count = self._run(positions)
+        if count == 0:
+            self._kinds = np.zeros(0, dtype=np.int32)
+            self._bounds = np.zeros(0, dtype=np.float32)
+            return np.zeros((0, 2), dtype=np.int32)
+        hits = self.hits[:count].numpy().reshape(-1, 2).astype(np.int32)
+        kinds = self.hit_kind[:count].numpy()
+        bounds = self.hit_bound[:count].numpy()
+        order = np.lexsort((hits[:, 1], hits[:, 0]))
+        hits, self._kinds, self._bounds = hits[order], kinds[order], bounds[order]
+        near = self._kinds == 2
+        self.stats.hits = count
+        self.stats.near = int(near.sum())
+        self.stats.crossings = count - self.stats.near
+        self.stats.max_near_bound = float(self._bounds[near].max()) if self.stats.near else 0.0
+        return hits
+
+    def details(self) -> tuple[np.ndarray, np.ndarray]:
+        """Kind and distance bound of each row of the last :meth:`find` result.
+
+        Returns:
+            ``(kinds, bounds)``: (k,) int32 :class:`~pscc.geometry.segment_triangle.SegmentTriangleKind`
+            values (1 certain crossing, 2 near) and (k,) float32 certified bounds on the
+            edge-face distance (0 for crossings, length units).
+
+        Allocates: no. Capture-safe: no (host data).
+        """
+        return self._kinds, self._bounds
+
+    def has_intersections(self, positions: object) -> bool:
+        """Whether any edge meets (or is within its bound of) a face it shares no vertex with.
+
+        Sync points: those of :meth:`find`, except the copy of the hits (only their count is read).
+
+        Args:
+            positions: as for :meth:`find`.
+
+        Returns:
+            True when at least one pair is reported.
+
+        Raises:
+            InputError: invalid positions.
+            CapacityError: more hits than int32 slots.
+
+        Allocates: when the hit buffer or the spatial hash grows. Capture-safe: no.
+        """
+        count = self._run(positions)
+        self._kinds = np.zeros(0, dtype=np.int32)
+        self._bounds = np.zeros(0, dtype=np.float32)
+        self.stats.hits = count
+        return count > 0
+
+    def object_pairs(self, pairs: np.ndarray) -> np.ndarray:
+        """Objects involved in (edge id, face id) pairs, e.g. the result of :meth:`find`.
+
+        The object of an edge is that of its owner face (:attr:`edge_owner_faces`).
+
+        Args:
+            pairs: (k, 2) integer (edge id, face id) rows.
+
+        Returns:
+            (j, 2) int32 unique rows ``(min, max)`` of the two objects, sorted; ``(i, i)`` is a
+            self-intersection of object i.
+
+        Allocates: yes (host arrays). Capture-safe: no.
+        """
+        rows = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        if rows.shape[0] == 0:
+            return np.zeros((0, 2), dtype=np.int32)
+        edge_objects = self.object_ids[self._edge_owner_np[rows[:, 0]]]
+        face_objects = self.object_ids[rows[:, 1]]
+        both = np.stack([np.minimum(edge_objects, face_objects), np.maximum(edge_objects, face_objects)], axis=1)
+        return np.unique(both, axis=0).astype(np.int32)

@@ -1,0 +1,405 @@
+"""Assembly of the linearised backward-Euler system as a 3x3-block sparse matrix (BSR).
+
+One step solves ``A dv = b`` with (Baraff & Witkin 1998)
+
+    A = M + dt D + dt^2 H,        b = dt f(x_t) - (dt D + dt^2 H) v_t,
+
+where H = -df/dx is the PSD Hessian approximation of every element, D = -df/dv its damping and f the
+conservative + external forces at ``x_t``. Element by element, ``A_e = dt D_e + dt^2 H_e`` and the
+right-hand side gets ``dt f_e - A_e v``; damping and friction forces therefore enter only through
+their blocks (they are linear in v).
+
+Triplet layout (every element writes its own blocks; ``warp.sparse`` sums duplicates):
+
+====================================  ===========  =============================================
+triplet range                         writer       blocks
+====================================  ===========  =============================================
+[0, n)                                vertex       (i, i): mass (or the Dirichlet scale)
+[n, n + 9 m)                          face         (a, b) for a, b in the face's 3 vertices
+[.. , .. + 16 hinge_count)            hinge        (a, b) for a, b in the hinge's 4 vertices
+[.. , .. + 16 contact_capacity)       contact      (a, b) for a, b in the contact's 4 vertices
+====================================  ===========  =============================================
+
+Dirichlet rows (scripted and massless vertices): the row and column of vertex i are replaced by
+``s_i I`` (s_i its mass, or 1) with ``b_i = s_i dv_i`` for the prescribed ``dv_i``. Element blocks
+touching such a vertex are written as zero blocks (dropped by the BSR build), and free rows move the
+known part to the right-hand side: ``b_k -= A_kj v_ref_j`` with ``v_ref_j`` the prescribed new
+velocity of j, which is the same as ``-A_kj (v_j + dv_j)``. Free vertices use ``v_ref = v_t``.
+
+Force accumulation into ``b`` uses float atomics: bitwise reproducible on the CPU; on CUDA set
+``wp.config.deterministic`` before import for run-to-run reproducibility.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+from warp.sparse import bsr_set_from_triplets, bsr_zeros
+
+from pscc.sim.contact_springs import ContactSprings
+from pscc.sim.materials import (
+    dihedral_angle,
+    dihedral_angle_gradient,
+    green_strain,
+    hinge_is_degenerate,
+    membrane_clamped_stress,
+    membrane_deformation,
+    membrane_gauss_newton_block,
+    membrane_geometric_coefficient,
+    membrane_gradient,
+    membrane_shape_vector,
+    membrane_stress,
+    wrap_angle,
+)
+from pscc.sim.model import VERTEX_FREE, VERTEX_SCRIPTED, ClothModel, FaceArrays, HingeArrays, VertexArrays
+
+wp.set_module_options({"enable_backward": False})
+
+_FREE = wp.constant(VERTEX_FREE)
+_SCRIPTED = wp.constant(VERTEX_SCRIPTED)
+
+@wp.struct
+class StepParams:
+    """Per-step scalars of the assembly kernels."""
+
+    dt: float  # time step [s]
+    gravity: wp.vec3  # [m/s^2]
+    wind: wp.vec3  # [m/s]
+    air_drag: float  # [kg/(m^2 s)]
+    contact_stiffness: float  # [N/m]; <= 0 selects the automatic per-contact stiffness
+    contact_stiffness_scale: float  # dimensionless
+    friction_epsilon: float  # eps_v [m/s]
+    hinge_degeneracy_ratio: float  # dimensionless
+
+
+@wp.struct
+class Triplets:
+    """COO blocks: row and column vertex ids and the 3x3 block."""
+
+    rows: wp.array(dtype=wp.int32)
+    cols: wp.array(dtype=wp.int32)
+    values: wp.array(dtype=wp.mat33)
+
+
+@wp.struct
+class ContactArrays:
+    """Device view of a :class:`pscc.sim.ContactSprings` (rebuilt when its buffers grow)."""
+
+    vertices: wp.array(dtype=wp.vec4i)
+    weights: wp.array(dtype=wp.vec4)
+    normals: wp.array(dtype=wp.vec3)
+    count: wp.array(dtype=wp.int32)
+    rest_gap: float
+
+
+@wp.func
+def _emit_block(triplets: Triplets, slot: int, i: int, j: int, block: wp.mat33, kind: wp.array(dtype=wp.int32),
+                v_ref: wp.array(dtype=wp.vec3), rhs: wp.array(dtype=wp.vec3)):
+    """Write block (i, j) of an element; move ``A_ij v_ref_j`` to the right-hand side of a free row i."""
+    triplets.rows[slot] = i
+    triplets.cols[slot] = j
+    value = wp.mat33(0.0)
+    if kind[i] == _FREE:
+        wp.atomic_sub(rhs, i, block * v_ref[j])
+        if kind[j] == _FREE:
+            value = block
+    triplets.values[slot] = value
+
+
+@wp.func
+def _emit_force(i: int, force: wp.vec3, dt: float, kind: wp.array(dtype=wp.int32), rhs: wp.array(dtype=wp.vec3)):
+    """Add ``dt * force`` to the right-hand side of a free row i."""
+    if kind[i] == _FREE:
+        wp.atomic_add(rhs, i, dt * force)
+
+
+@wp.func
+def _emit_empty(triplets: Triplets, slot: int, i: int):
+    """Write a zero block on the diagonal of vertex i (a placeholder the BSR build drops)."""
+    triplets.rows[slot] = i
+    triplets.cols[slot] = i
+    triplets.values[slot] = wp.mat33(0.0)
+
+
+@wp.kernel
+def _prepare_vertices(
+    # in:
+    vertices: VertexArrays,
+    targets: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    warm_start: int,
+    # out:
+    v_ref: wp.array(dtype=wp.vec3),
+    triplets: Triplets,
+    rhs: wp.array(dtype=wp.vec3),
+    dv: wp.array(dtype=wp.vec3),
+):
+    """One thread per vertex: mass block, gravity, Dirichlet rows and the initial guess of dv."""
+    i = wp.tid()
+    mass = vertices.mass[i]
+    kind = vertices.kind[i]
+    v = velocities[i]
+    dt = params.dt
+    triplets.rows[i] = i
+    triplets.cols[i] = i
+    if kind == _FREE:
+        v_ref[i] = v
+        triplets.values[i] = wp.identity(n=3, dtype=float) * mass
+        rhs[i] = (dt * mass) * params.gravity
+        if warm_start == 0:
+            dv[i] = wp.vec3(0.0)
+        return
+    target_velocity = v + dt * params.gravity  # massless: ballistic
+    if kind == _SCRIPTED:
+        target_velocity = (targets[i] - positions[i]) / dt
+    scale = wp.where(mass > 0.0, mass, 1.0)
+    v_ref[i] = target_velocity
+    triplets.values[i] = wp.identity(n=3, dtype=float) * scale
+    rhs[i] = scale * (target_velocity - v)
+    dv[i] = target_velocity - v
+
+
+@wp.kernel
+def _assemble_faces(
+    # in:
+    faces: FaceArrays,
+    kind: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.vec3),
+    v_ref: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    offset: int,
+    # out:
+    triplets: Triplets,
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """One thread per face: membrane force, its 9 Hessian/damping blocks, and air drag."""
+    f = wp.tid()
+    ids = faces.indices[f]
+    x0 = positions[ids[0]]
+    x1 = positions[ids[1]]
+    x2 = positions[ids[2]]
+    inv_rest = faces.inv_rest[f]
+    area = faces.rest_area[f]
+    stiffness = faces.stiffness[f]
+    dt = params.dt
+    f0, f1 = membrane_deformation(x0, x1, x2, inv_rest)
+    stress = membrane_stress(green_strain(f0, f1), stiffness)
+    clamped = membrane_clamped_stress(stress)
+    gauss_newton_scale = dt * dt + dt * faces.damping[f]
+
+    # Air drag on the normal relative velocity: constant wind push plus an implicit damper.
+    normal = wp.cross(x1 - x0, x2 - x0)
+    double_area = wp.length(normal)
+    drag = float(0.0)
+    if double_area > 0.0:
+        normal = normal / double_area
+        drag = params.air_drag * double_area / 6.0
+    wind_force = (drag * wp.dot(params.wind, normal)) * normal
+    drag_block = (dt * drag) * wp.outer(normal, normal)
+
+    for a in range(3):
+        shape_a = membrane_shape_vector(inv_rest, a)
+        force = wind_force - membrane_gradient(f0, f1, shape_a, stress, area)
+        _emit_force(ids[a], force, dt, kind, rhs)
+        for b in range(3):
+            shape_b = membrane_shape_vector(inv_rest, b)
+            block = gauss_newton_scale * membrane_gauss_newton_block(f0, f1, shape_a, shape_b, stiffness, area)
+            geometric = dt * dt * membrane_geometric_coefficient(shape_a, shape_b, clamped, area)
+            block = block + wp.identity(n=3, dtype=float) * geometric
+            if a == b:
+                block = block + drag_block
+            _emit_block(triplets, offset + 9 * f + 3 * a + b, ids[a], ids[b], block, kind, v_ref, rhs)
+
+
+@wp.kernel
+def _assemble_hinges(
+    # in:
+    hinges: HingeArrays,
+    kind: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.vec3),
+    v_ref: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    offset: int,
+    # out:
+    triplets: Triplets,
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """One thread per hinge: bending force and its 16 Gauss-Newton blocks (zero when degenerate)."""
+    h = wp.tid()
+    ids = hinges.indices[h]
+    x0 = positions[ids[0]]
+    x1 = positions[ids[1]]
+    x2 = positions[ids[2]]
+    x3 = positions[ids[3]]
+    base = offset + 16 * h
+    if hinge_is_degenerate(x0, x1, x2, x3, hinges.rest_length[h], params.hinge_degeneracy_ratio):
+        for a in range(16):
+            _emit_empty(triplets, base + a, ids[0])
+        return
+    dt = params.dt
+    stiffness = hinges.stiffness[h]
+    delta = wrap_angle(dihedral_angle(x0, x1, x2, x3) - hinges.rest_angle[h])
+    gradient = dihedral_angle_gradient(x0, x1, x2, x3)
+    block_scale = (dt * dt + dt * hinges.damping[h]) * stiffness
+    for a in range(4):
+        _emit_force(ids[a], (-stiffness * delta) * gradient[a], dt, kind, rhs)
+        for b in range(4):
+            block = block_scale * wp.outer(gradient[a], gradient[b])
+            _emit_block(triplets, base + 4 * a + b, ids[a], ids[b], block, kind, v_ref, rhs)
+
+
+@wp.kernel
+def _assemble_contacts(
+    # in:
+    contacts: ContactArrays,
+    vertices: VertexArrays,
+    positions: wp.array(dtype=wp.vec3),
+    v_ref: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    offset: int,
+    # out:
+    triplets: Triplets,
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """One thread per contact slot: spring force, friction damper and their 16 blocks."""
+    c = wp.tid()
+    base = offset + 16 * c
+    vertex_count = positions.shape[0]
+    ids = contacts.vertices[c]
+    valid = c < wp.min(contacts.count[0], contacts.vertices.shape[0])
+    for a in range(4):
+        if ids[a] < 0 or ids[a] >= vertex_count:
+            valid = False
+    if not valid:
+        for a in range(16):
+            _emit_empty(triplets, base + a, 0)
+        return
+
+    w = contacts.weights[c]
+    n = contacts.normals[c]
+    point = wp.vec3(0.0)
+    relative_velocity = wp.vec3(0.0)
+    inverse_mass = float(0.0)
+    friction = float(0.0)
+    for a in range(4):
+        point = point + w[a] * positions[ids[a]]
+        relative_velocity = relative_velocity + w[a] * v_ref[ids[a]]
+        mass = vertices.mass[ids[a]]
+        if vertices.kind[ids[a]] == _FREE and mass > 0.0:
+            inverse_mass = inverse_mass + w[a] * w[a] / mass
+        friction = friction + 0.5 * wp.abs(w[a]) * vertices.friction[ids[a]]
+    gap = wp.dot(n, point) - contacts.rest_gap
+    dt = params.dt
+    stiffness = params.contact_stiffness
+    if stiffness <= 0.0 and inverse_mass > 0.0:
+        stiffness = params.contact_stiffness_scale / (inverse_mass * dt * dt)
+    if gap >= 0.0 or stiffness <= 0.0:
+        for a in range(16):
+            _emit_empty(triplets, base + a, ids[0])
+        return
+
+    normal_force = -stiffness * gap  # > 0
+    tangential = relative_velocity - wp.dot(relative_velocity, n) * n
+    damping = friction * normal_force / wp.max(wp.length(tangential), params.friction_epsilon)
+    normal_block = (dt * dt * stiffness) * wp.outer(n, n)
+    friction_block = (dt * damping) * (wp.identity(n=3, dtype=float) - wp.outer(n, n))
+    for a in range(4):
+        _emit_force(ids[a], (normal_force * w[a]) * n, dt, vertices.kind, rhs)
+        for b in range(4):
+            block = (w[a] * w[b]) * (normal_block + friction_block)
+            _emit_block(triplets, base + 4 * a + b, ids[a], ids[b], block, vertices.kind, v_ref, rhs)
+
+
+class ImplicitSystem:
+    """Owns the triplet buffers, the BSR matrix A and the right-hand side b of one implicit step.
+
+    Args:
+        model: The cloth.
+
+    Attributes:
+        matrix: (n x n blocks of 3x3) BSR matrix A [kg], rebuilt by every :meth:`assemble`.
+        rhs: (n,) vec3 right-hand side b [kg m/s].
+        reference_velocities: (n,) vec3 ``v_ref``: v_t for free vertices, the prescribed new velocity
+            for Dirichlet vertices [m/s].
+    """
+
+    def __init__(self, model: ClothModel) -> None:
+        self.model = model
+        self.device = model.device
+        n = model.vertex_count
+        self._face_offset = n
+        self._hinge_offset = n + 9 * model.face_count
+        self._contact_offset = self._hinge_offset + 16 * model.hinge_count
+        self._contact_capacity = 0
+        self.triplets = Triplets()
+        self._allocate_triplets(self._contact_offset)
+        self.matrix = bsr_zeros(n, n, wp.mat33, device=self.device)
+        self.rhs = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
+
+    @property
+    def triplet_capacity(self) -> int:
+        """Number of COO block slots."""
+        return int(self.triplets.rows.shape[0])
+
+    def reserve_contacts(self, capacity: int) -> None:
+        """Make room for ``capacity`` contact slots. Allocates: only when growing. Capture-safe: no."""
+        if capacity > self._contact_capacity:
+            self._contact_capacity = int(capacity)
+            self._allocate_triplets(self._contact_offset + 16 * self._contact_capacity)
+
+    def assemble(self, positions: wp.array, velocities: wp.array, targets: wp.array, params: StepParams,
+                 contacts: ContactSprings | None, dv: wp.array, *, warm_start: bool = False) -> None:
+        """Fill :attr:`matrix` and :attr:`rhs` for the state (x_t, v_t); write the initial guess into ``dv``.
+
+        Args:
+            positions: (n,) vec3 x_t [m].
+            velocities: (n,) vec3 v_t [m/s].
+            targets: (n,) vec3 positions the scripted vertices must reach at the end of the step [m].
+            params: Per-step scalars.
+            contacts: Optional contact springs (gaps evaluated at x_t).
+            dv: (n,) vec3 initial guess, written here: the prescribed dv of Dirichlet vertices, and for
+                free vertices 0 or, with ``warm_start``, the value ``dv`` already holds (the last step's).
+            warm_start: Keep ``dv`` of free vertices as the initial guess.
+
+        Allocates: yes (``warp.sparse`` temporaries; triplets grow with the contact capacity).
+        Capture-safe: no.
+        """
+        model = self.model
+        n = model.vertex_count
+        contact_capacity = contacts.capacity if contacts is not None else 0
+        self.reserve_contacts(contact_capacity)
+        wp.launch(_prepare_vertices, dim=n, device=self.device,
+                  inputs=[model.vertices, targets, positions, velocities, params, int(warm_start)],
+                  outputs=[self.reference_velocities, self.triplets, self.rhs, dv])
+        if model.face_count:
+            wp.launch(_assemble_faces, dim=model.face_count, device=self.device,
+                      inputs=[model.faces, model.vertices.kind, positions, self.reference_velocities, params,
+                              self._face_offset],
+                      outputs=[self.triplets, self.rhs])
+        if model.hinge_count:
+            wp.launch(_assemble_hinges, dim=model.hinge_count, device=self.device,
+                      inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params,
+                              self._hinge_offset],
+                      outputs=[self.triplets, self.rhs])
+        if contacts is not None:
+            view = ContactArrays()
+            view.vertices = contacts.vertices
+            view.weights = contacts.weights
+            view.normals = contacts.normals
+            view.count = contacts.count
+            view.rest_gap = contacts.rest_gap
+            wp.launch(_assemble_contacts, dim=contact_capacity, device=self.device,
+                      inputs=[view, model.vertices, positions, self.reference_velocities, params,
+                              self._contact_offset],
+                      outputs=[self.triplets, self.rhs])
+        used = self._contact_offset + 16 * contact_capacity
+        bsr_set_from_triplets(self.matrix, self.triplets.rows[:used], self.triplets.cols[:used],
+                              self.triplets.values[:used], prune_numerical_zeros=True)
+
+    def _allocate_triplets(self, size: int) -> None:
+        size = max(1, size)
+        self.triplets.rows = wp.zeros(size, dtype=wp.int32, device=self.device)
+        self.triplets.cols = wp.zeros(size, dtype=wp.int32, device=self.device)
+        self.triplets.values = wp.zeros(size, dtype=wp.mat33, device=self.device)

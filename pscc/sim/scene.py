@@ -1,0 +1,48 @@
+"""A scene: the cloth, its material, handles, obstacles and time stepping (what a solver runs)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pscc.sim.config import ClothMaterial, SolverConfig
+from pscc.sim.obstacles import Handle, Obstacle
+
+
+@dataclass
+class Scene:
+    """Everything the simulator needs to run a scene.
+
+    Attributes:
+        name: scene name.
+        description: one line for ``pscc scenes`` and the stats.
+        vertices: (n, 3) float32 initial cloth positions [m].
+        faces: (m, 3) int32 cloth triangles.
+        rest: (n, 2) float32 material (flat rest) coordinates [m].
+        object_ids: (m,) int32 cloth piece of each face.
+        material: the cloth material (all pieces).
+        solver: integration settings.
+        handles: prescribed cloth vertices (pins and scripted ends).
+        obstacles: animated rigid obstacles.
+        frame_time: time between written frames [s].
+        steps_per_frame: time steps per frame (dt = frame_time / steps_per_frame).
+    """
+
+    name: str
+    description: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    rest: np.ndarray
+    object_ids: np.ndarray
+    material: ClothMaterial = field(default_factory=ClothMaterial)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    handles: list[Handle] = field(default_factory=list)
+    obstacles: list[Obstacle] = field(default_factory=list)
+    frame_time: float = 1.0 / 30.0
+    steps_per_frame: int = 8
+
+    @property
+    def time_step(self) -> float:
+        """dt [s]."""
+        return self.frame_time / self.steps_per_frame

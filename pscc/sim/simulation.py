@@ -1,0 +1,119 @@
+"""Run a scene frame by frame: the solver, the frame files and ``stats.json`` (``pscc simulate``)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from pscc.io.frames import write_frame, write_json_atomic
+from pscc.sim.contact_config import ContactConfig
+from pscc.sim.scene import Scene
+from pscc.sim.solver import ClothSolver
+
+
+class Simulation:
+    """A scene, its solver and its current state.
+
+    Args:
+        scene: the scene to simulate.
+        device: Warp device name (``None``: Warp's default).
+        contact: contact settings (default :class:`ContactConfig`).
+    """
+
+    def __init__(self, scene: Scene, device: str | None = None, contact: ContactConfig | None = None) -> None:
+        self.scene = scene
+        self.solver = ClothSolver(scene, device=device, contact=contact)
+        self.state = self.solver.initial_state()
+        self._next = self.solver.initial_state()
+        self.frame = 0
+        self.frame_stats: list[dict[str, Any]] = []
+
+    @property
+    def time(self) -> float:
+        """Simulated time [s]."""
+        return self.solver.time
+
+    def step_frame(self) -> dict[str, Any]:
+        """Advance one frame (``scene.steps_per_frame`` steps); return the frame's stats."""
+        started = time.perf_counter()
+        steps = []
+        for _ in range(self.scene.steps_per_frame):
+            stats = self.solver.step(self.state, self._next, self.scene.time_step)
+            self.state, self._next = self._next, self.state
+            steps.append(stats)
+        self.frame += 1
+        record = _sum_steps(steps)
+        record.update(frame=self.frame, time=self.time, seconds_total=time.perf_counter() - started)
+        self.frame_stats.append(record)
+        return record
+
+    def write_frame(self, out_dir: Path) -> Path:
+        """Write the current state as frame ``self.frame`` (the NPZ contract of ``pscc.io.frames``)."""
+        obstacle_vertices, obstacle_faces = self.solver.obstacle_mesh(self.time)
+        return write_frame(out_dir, self.frame, self.state.positions.numpy(), self.scene.faces,
+                           self.scene.object_ids, obstacle_vertices, obstacle_faces)
+
+    def run(self, frames: int, out_dir: Path, progress: bool = True) -> dict[str, Any]:
+        """Write frame 0 (the initial state) and ``frames`` simulated frames, then ``stats.json``.
+
+        Returns:
+            The stats written to ``out_dir/stats.json``.
+        """
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.write_frame(out_dir)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=frames, unit="frame", desc=self.scene.name, dynamic_ncols=True)
+        for _ in range(frames):
+            record = self.step_frame()
+            self.write_frame(out_dir)
+            if bar is not None:
+                bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
+                                halvings=record["counts"]["halvings"], refresh=False)
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        stats = self.summary()
+        write_json_atomic(out_dir / "stats.json", stats)
+        return stats
+
+    def summary(self) -> dict[str, Any]:
+        """Scene, device, sizes and the per-frame stats."""
+        solver = self.solver
+        return {
+            "scene": self.scene.name,
+            "description": self.scene.description,
+            "device": str(solver.device),
+            "cloth_vertices": int(self.scene.vertices.shape[0]),
+            "cloth_triangles": int(self.scene.faces.shape[0]),
+            "obstacle_triangles": int(sum(o.faces.shape[0] for o in self.scene.obstacles)),
+            "time_step": self.scene.time_step,
+            "frame_time": self.scene.frame_time,
+            "frames": self.frame_stats,
+            "device_bytes": solver.device_bytes(),
+        }
+
+
+def _sum_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
+    """Stage seconds and counts of a frame: sums over its steps (maxima for the sizes)."""
+    seconds: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    for stats in steps:
+        for key, value in stats["seconds"].items():
+            seconds[key] = seconds.get(key, 0.0) + float(value)
+        for key, value in stats["counts"].items():
+            if key in ("front_size", "contacts"):
+                counts[key] = max(counts.get(key, 0), int(value))
+            else:
+                counts[key] = counts.get(key, 0) + int(value)
+    return {"steps": len(steps), "seconds": seconds, "counts": counts}
+
+
+def load_stats(path: Path) -> dict[str, Any]:
+    """Read a ``stats.json``."""
+    return json.loads(Path(path).read_text())

@@ -1,0 +1,333 @@
+"""The cloth solver of PSCC section 5: implicit integration, proximity springs, CCD penetration handling.
+
+One :meth:`ClothSolver.step` (the paper's Figure 8b pipeline, details in ``docs/simulator.md``):
+
+1. **Integration**: linearised backward Euler (:class:`pscc.sim.ImplicitEuler`) with the contact
+   springs found by DCD at the end of the previous step, gravity, wind, drag and the prescribed
+   handle and obstacle positions at t + dt -> predicted end positions.
+2. **Broad phase**, once: swept boxes over [x_t, x_pred] grown by the thickness h (normal-cone
+   front, {cell, node} hashing, feature pairs).
+3. **CCD + penetration handling** on those candidates: every pair coming closer than delta during
+   the step gets an inelastic impulse on its end positions; after ``impulse_rounds`` rounds the
+   colliding vertices are merged into rigid impact zones, until CCD finds nothing.
+4. When the response moved anything, the final trajectory is **certified** by one more broad phase
+   over it (the candidates and the normal-cone front of step 2 were computed for the predicted
+   trajectory) and CCD again; the loop continues if that finds a collision.
+5. **DCD** at the end positions on the same (last) broad phase -> contact springs for the next step.
+6. The **independent intersection check** of the end state (:class:`IntersectionCheck`); a
+   crossing, NaN/Inf, a zone that cannot move rigidly or too many rounds reject the step, which is
+   then split into two half steps (``max_step_halvings`` times at most).
+
+Index space: the solver's state holds the cloth vertices followed by every obstacle's vertices.
+Obstacle vertices are handles of the integrator (kinematic, prescribed each step), so proximity
+springs between cloth and obstacles need no special case.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from pscc.collision.detector import CollisionDetector
+from pscc.collision.intersection import IntersectionCheck
+from pscc.errors import InputError, PsccError
+from pscc.sim.contact_config import ContactConfig
+from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones, ImpulseResponse
+from pscc.sim.integrator import ImplicitEuler
+from pscc.sim.model import VERTEX_FREE, ClothModel
+from pscc.sim.obstacles import step_map
+from pscc.sim.proximity import ProximityContacts
+from pscc.sim.scene import Scene
+from pscc.sim.state import ClothState
+
+wp.set_module_options({"enable_backward": False})
+
+
+class SimulationError(PsccError):
+    """A step could not be completed free of intersections even after the allowed step halvings."""
+
+
+class _StepRejected(Exception):
+    """Internal: this attempt failed; retry with half the step."""
+
+
+@wp.kernel
+def _velocities_from_positions(
+    # in:
+    positions_t0: wp.array(dtype=wp.vec3),
+    positions_t1: wp.array(dtype=wp.vec3),
+    inverse_dt: float,
+    # out:
+    velocities: wp.array(dtype=wp.vec3),
+):
+    """One thread per vertex: v = (x1 - x0) / dt."""
+    v = wp.tid()
+    velocities[v] = (positions_t1[v] - positions_t0[v]) * inverse_dt
+
+
+def _new_stats() -> dict[str, Any]:
+    seconds = {k: 0.0 for k in ("integration", "broad_phase", "narrow_phase", "penetration", "proximity",
+                                 "intersection_check", "total")}
+    counts = {k: 0 for k in ("cg_iterations", "broad_phases", "ccd_rounds", "ccd_hits", "impulse_rounds",
+                             "zone_rounds", "halvings", "contacts", "front_size", "dcd_vertex_face",
+                             "dcd_edge_edge")}
+    return {"seconds": seconds, "counts": counts}
+
+
+class ClothSolver:
+    """Steps a :class:`pscc.scenes.Scene` with every step ending free of intersections.
+
+    Args:
+        scene: cloth, material, handles, obstacles and solver settings.
+        device: Warp device (``None``: Warp's default).
+        contact: contact settings (default :class:`ContactConfig`).
+
+    Raises:
+        InputError: invalid scene data, or an initial state that already intersects (unless
+            ``contact.allow_initial_intersections``).
+    """
+
+    def __init__(self, scene: Scene, *, device: str | None = None, contact: ContactConfig | None = None) -> None:
+        self.scene = scene
+        self.contact = (contact if contact is not None else ContactConfig()).validate()
+        material = scene.material.validate()
+        self.device = wp.get_device(device)
+        self.time = 0.0
+        cloth_count = int(scene.vertices.shape[0])
+        self.cloth_vertex_count = cloth_count
+
+        # Index space: cloth vertices, then the vertices of each obstacle.
+        obstacle_positions = [o.positions(0.0) for o in scene.obstacles]
+        offsets = np.cumsum([cloth_count] + [p.shape[0] for p in obstacle_positions])
+        self._obstacle_offsets = offsets
+        vertices = np.concatenate([np.asarray(scene.vertices, np.float32), *obstacle_positions], axis=0)
+        rest = np.asarray(scene.rest, dtype=np.float32)
+        if rest.ndim != 2 or rest.shape != (cloth_count, 2):
+            raise InputError(scene.name, "rest", f"shape {rest.shape} is not ({cloth_count}, 2)",
+                             "give (u, v) material coordinates per cloth vertex")
+        rest_all = np.concatenate([rest, *(p[:, :2] for p in obstacle_positions)], axis=0)
+        handle_ids = [h.vertices for h in scene.handles]
+        for handle in scene.handles:
+            if handle.vertices.max() >= cloth_count:
+                raise InputError(scene.name, f"handles[{handle.name}].vertices", "a vertex id is not a cloth vertex",
+                                 f"use ids below {cloth_count}")
+        obstacle_ids = [np.arange(offsets[k], offsets[k + 1]) for k in range(len(scene.obstacles))]
+        all_handles = np.concatenate(handle_ids + obstacle_ids) if handle_ids or obstacle_ids else None
+        if all_handles is not None and np.unique(all_handles).size != all_handles.size:
+            raise InputError(scene.name, "handles", "a vertex belongs to two handles", "list each vertex in one handle")
+        self.model = ClothModel(vertices, scene.faces, rest=rest_all, materials=material, object_ids=None,
+                                handles=all_handles, device=self.device)
+        self.integrator = ImplicitEuler(self.model, scene.solver, self.device)
+        n = self.model.vertex_count
+
+        # Kinematic groups: each handle, then each obstacle.
+        self.kinematic_group = np.full(n, -1, dtype=np.int64)
+        for group, ids in enumerate(handle_ids + obstacle_ids):
+            self.kinematic_group[ids] = group
+        self._initial = vertices.astype(np.float64)
+        masses = self.model.mass_host.astype(np.float64)
+        free = (self.model.kind_host == VERTEX_FREE) & (masses > 0.0)
+        inverse_mass = np.where(free, 1.0 / np.where(masses > 0.0, masses, 1.0), 0.0)
+        self._masses = masses
+        self._kinematic = ~free
+
+        # Collision mesh: cloth faces, then obstacle faces; one object per cloth piece and per obstacle.
+        cloth_objects = np.asarray(scene.object_ids, dtype=np.int32)
+        first_obstacle = int(cloth_objects.max()) + 1 if cloth_objects.size else 0
+        faces = [np.asarray(scene.faces, np.int32)]
+        objects = [cloth_objects]
+        for k, obstacle in enumerate(scene.obstacles):
+            faces.append(obstacle.faces + offsets[k])
+            objects.append(np.full(obstacle.faces.shape[0], first_obstacle + k, dtype=np.int32))
+        self.collision_faces = np.concatenate(faces).astype(np.int32)
+        collision_objects = np.concatenate(objects)
+        rigid = range(first_obstacle, first_obstacle + len(scene.obstacles))
+        self.detector = CollisionDetector(self.collision_faces, method=self.contact.method,
+                                          object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
+                                          device=str(self.device))
+        self.thickness = float(material.thickness)
+        if self.thickness <= 0.0:
+            raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
+        self.ccd_distance = self.contact.ccd_distance_ratio * self.thickness
+        self.separation = self.contact.separation_ratio * self.thickness
+        self.impulses = ImpulseResponse(inverse_mass, self.device)
+        self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device)
+        self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device)
+        extent = vertices.max(axis=0) - vertices.min(axis=0)
+        self._scale = float(np.linalg.norm(extent))
+        self._scratch: dict[int, ClothState] = {}
+
+        initial = self.intersection_check.find(vertices)
+        if initial.shape[0] and not self.contact.allow_initial_intersections:
+            edge, face = (int(v) for v in initial[0][:2])
+            raise InputError(scene.name, "vertices",
+                             f"the initial state intersects itself: {initial.shape[0]} edge-face crossings "
+                             f"(first: edge {edge} through face {face})",
+                             "separate the surfaces, or set ContactConfig(allow_initial_intersections=True) "
+                             "to proceed anyway")
+
+    # ------------------------------------------------------------------ public
+
+    def initial_state(self) -> ClothState:
+        """A new state at the scene's initial positions, at rest. Allocates: yes."""
+        return ClothState.from_model(self.model)
+
+    def obstacle_mesh(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """All obstacle vertices at time ``t`` and their faces (ids into those vertices)."""
+        obstacles = self.scene.obstacles
+        if not obstacles:
+            return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)
+        base = self._obstacle_offsets - self.cloth_vertex_count
+        vertices = np.concatenate([o.positions(t) for o in obstacles])
+        faces = np.concatenate([o.faces + base[k] for k, o in enumerate(obstacles)])
+        return vertices.astype(np.float32), faces.astype(np.int32)
+
+    def device_bytes(self) -> dict[str, int]:
+        """Device memory of the collision structures and the contact springs, in bytes."""
+        collision = self.detector.device_bytes() if self.detector.topology is not None else {"total": 0}
+        springs = self.proximity.springs
+        contact = springs.vertices.capacity + springs.weights.capacity + springs.normals.capacity
+        return {"collision": int(collision["total"]), "contact_springs": int(contact)}
+
+    def step(self, state_in: ClothState, state_out: ClothState, dt: float) -> dict[str, Any]:
+        """Advance ``state_in`` by ``dt`` [s] into ``state_out``; the result is intersection-free.
+
+        Returns:
+            Step stats: ``seconds`` per stage (integration, broad_phase, narrow_phase, penetration,
+            proximity, intersection_check, total) and ``counts`` (cg_iterations, broad_phases,
+            ccd_rounds, ccd_hits, impulse_rounds, zone_rounds, halvings, contacts, front_size,
+            dcd_vertex_face, dcd_edge_edge).
+
+        Raises:
+            SimulationError: the step still fails after ``max_step_halvings`` halvings.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        started = time.perf_counter()
+        stats = _new_stats()
+        self._advance(state_in, state_out, self.time, float(dt), 0, stats)
+        self.time += float(dt)
+        stats["seconds"]["total"] = time.perf_counter() - started
+        stats["counts"]["contacts"] = self.proximity.springs.host_count
+        return stats
+
+    # ------------------------------------------------------------------ internals
+
+    def _advance(self, state_in: ClothState, state_out: ClothState, t: float, dt: float, depth: int,
+                 stats: dict[str, Any]) -> None:
+        try:
+            self._attempt(state_in, state_out, t, dt, stats)
+        except _StepRejected as why:
+            if depth >= self.contact.max_step_halvings:
+                raise SimulationError(f"step at t={t:.6g} s could not be made intersection-free after "
+                                      f"{depth} halvings (dt={dt:.3g} s): {why}") from None
+            stats["counts"]["halvings"] += 1
+            middle = self._scratch.get(depth)
+            if middle is None:
+                middle = self._scratch[depth] = self.initial_state()
+            self._advance(state_in, middle, t, dt / 2.0, depth + 1, stats)
+            self._advance(middle, state_out, t + dt / 2.0, dt / 2.0, depth + 1, stats)
+
+    def _kinematic_targets(self, t: float) -> np.ndarray:
+        """Positions of every handle and obstacle vertex at time t (rows of model.handle_ids order)."""
+        positions = np.zeros((self.model.vertex_count, 3), dtype=np.float64)
+        for handle in self.scene.handles:
+            rotation, translation = handle.transform(t)
+            positions[handle.vertices] = self._initial[handle.vertices] @ rotation.T + translation
+        for k, obstacle in enumerate(self.scene.obstacles):
+            positions[self._obstacle_offsets[k]:self._obstacle_offsets[k + 1]] = obstacle.positions(t)
+        return positions[self.model.handle_ids_host].astype(np.float32)
+
+    def _group_maps(self, t: float, dt: float) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        movers = list(self.scene.handles) + list(self.scene.obstacles)
+        return {g: step_map(m.transform(t), m.transform(t + dt)) for g, m in enumerate(movers)}
+
+    def _attempt(self, state_in: ClothState, state_out: ClothState, t: float, dt: float,
+                 stats: dict[str, Any]) -> None:
+        seconds, counts = stats["seconds"], stats["counts"]
+        mark = time.perf_counter()
+        springs = self.proximity.springs
+        targets = self._kinematic_targets(t + dt) if self.model.handle_count else None
+        integration = self.integrator.step(state_in, state_out, dt,
+                                           contacts=springs if springs.host_count else None,
+                                           handle_targets=targets)
+        counts["cg_iterations"] += integration.cg_iterations
+        seconds["integration"] += time.perf_counter() - mark
+        x0 = state_in.positions.numpy()
+        x1 = state_out.positions.numpy()
+        if not np.all(np.isfinite(x1)):
+            raise _StepRejected("the integrator produced NaN or Inf")
+
+        mark = time.perf_counter()
+        broad = self.detector.broad_phase(x0, x1, self.thickness)
+        counts["broad_phases"] += 1
+        counts["front_size"] = max(counts["front_size"], int(broad["front_size"]))
+        seconds["broad_phase"] += time.perf_counter() - mark
+        certified = True
+        zones: ImpactZones | None = None
+        faces = self.collision_faces
+        positions_t0 = wp.array(x0, dtype=wp.vec3, device=self.device)
+        positions_t1 = wp.array(x1, dtype=wp.vec3, device=self.device)
+        rounds = 0
+        while True:
+            mark = time.perf_counter()
+            result = self.detector.narrow_phase(x0, x1, self.ccd_distance)
+            seconds["narrow_phase"] += time.perf_counter() - mark
+            counts["ccd_rounds"] += 1
+            hits = result.vertex_face.shape[0] + result.edge_edge.shape[0]
+            counts["ccd_hits"] += hits
+            if hits == 0:
+                if certified:
+                    break
+                mark = time.perf_counter()
+                self.detector.broad_phase(x0, x1, self.thickness)
+                counts["broad_phases"] += 1
+                seconds["broad_phase"] += time.perf_counter() - mark
+                certified = True
+                continue
+            if rounds >= self.contact.max_response_rounds:
+                raise _StepRejected(f"{hits} collisions left after {rounds} response rounds")
+            rounds += 1
+            certified = False
+            mark = time.perf_counter()
+            vertex_face = np.concatenate([result.vertex_face[:, :1], faces[result.vertex_face[:, 1]]], axis=1)
+            if rounds <= self.contact.impulse_rounds:
+                counts["impulse_rounds"] += 1
+                positions_t1.assign(x1)
+                self.impulses.apply(vertex_face, result.vertex_face_toi, result.edge_edge, result.edge_edge_toi,
+                                    positions_t0, positions_t1, self.separation)
+                x1 = positions_t1.numpy()
+            else:
+                counts["zone_rounds"] += 1
+                if zones is None:
+                    zones = ImpactZones(self._masses, self.kinematic_group)
+                zones.merge(vertex_face)
+                zones.merge(result.edge_edge)
+                try:
+                    x1 = zones.apply(x0, x1, dt, self._group_maps(t, dt), self._scale)
+                except ImpactZoneFailure as failure:
+                    raise _StepRejected(str(failure)) from None
+            seconds["penetration"] += time.perf_counter() - mark
+            if not np.all(np.isfinite(x1)):
+                raise _StepRejected("the penetration response produced NaN or Inf")
+
+        if self.contact.check_intersections:
+            mark = time.perf_counter()
+            crossings = self.intersection_check.find(x1)
+            seconds["intersection_check"] += time.perf_counter() - mark
+            if crossings.shape[0]:
+                raise _StepRejected(f"the intersection check found {crossings.shape[0]} edge-face crossings")
+
+        mark = time.perf_counter()
+        state_out.positions.assign(x1)
+        wp.launch(_velocities_from_positions, dim=self.model.vertex_count,
+                  inputs=[state_in.positions, state_out.positions, 1.0 / dt], outputs=[state_out.velocities],
+                  device=self.device)
+        proximity = self.detector.narrow_phase(x1, None, self.thickness)
+        counts["dcd_vertex_face"] = int(proximity.vertex_face.shape[0])
+        counts["dcd_edge_edge"] = int(proximity.edge_edge.shape[0])
+        self.proximity.update(proximity.vertex_face, proximity.edge_edge, state_out.positions)
+        seconds["proximity"] += time.perf_counter() - mark
