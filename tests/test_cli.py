@@ -103,3 +103,43 @@ def test_demo_writes_outputs(tmp_path: Path, capsys) -> None:
     assert {"mesh.npz", "ccd_pairs.npz", "dcd_pairs.npz", "stats.json"} <= {p.name for p in tmp_path.iterdir()}
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert stats["ccd"]["mode"] == "ccd" and stats["dcd"]["mode"] == "dcd"
+
+
+def test_simulate_writes_frames_and_stats(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    assert main(["simulate", "drape", "--frames", "2", "--triangles", "200", "--out-dir", str(out),
+                 "--no-progress"]) == 0
+    assert "s per frame" in capsys.readouterr().out
+    frames = sorted((out / "frames").glob("frame_*.npz"))
+    assert [f.name for f in frames] == ["frame_00000.npz", "frame_00001.npz", "frame_00002.npz"]
+    with np.load(frames[-1]) as frame:
+        assert set(frame.files) == {"vertices", "faces", "object_ids", "obstacle_vertices", "obstacle_faces"}
+        assert frame["vertices"].dtype == np.float32 and frame["vertices"].shape[1] == 3
+        assert frame["faces"].shape == (frame["object_ids"].shape[0], 3)
+        assert frame["obstacle_faces"].shape[0] > 0 and frame["obstacle_vertices"].dtype == np.float32
+        assert frame["obstacle_faces"].max() < frame["obstacle_vertices"].shape[0]
+        assert np.all(np.isfinite(frame["vertices"]))
+    stats = json.loads((out / "stats.json").read_text())
+    assert stats["scene"] == "drape" and len(stats["frames"]) == 2
+    for record in stats["frames"]:
+        assert set(record["seconds"]) >= {"integration", "broad_phase", "narrow_phase", "penetration"}
+        assert record["counts"]["broad_phases"] >= record["steps"]
+
+
+def test_simulate_without_obstacles_writes_empty_obstacle_arrays(tmp_path: Path) -> None:
+    out = tmp_path / "twist"
+    assert main(["simulate", "twist", "--frames", "1", "--triangles", "100", "--out-dir", str(out),
+                 "--no-progress"]) == 0
+    with np.load(out / "frames" / "frame_00001.npz") as frame:
+        assert frame["obstacle_vertices"].shape == (0, 3) and frame["obstacle_faces"].shape == (0, 3)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--frames", "0"], "--frames"),
+    (["--triangles", "3"], "triangles"),
+])
+def test_simulate_bad_options_exit_2_and_write_nothing(tmp_path: Path, arguments, message, capsys) -> None:
+    out = tmp_path / "run"
+    assert main(["simulate", "drape", "--out-dir", str(out), "--no-progress", *arguments]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()

@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 import warp as wp
-from warp.optim.linear import LinearOperator, cg
 from warp.sparse import bsr_get_diag
 
 from pscc._checks import as_numpy
@@ -36,6 +35,7 @@ from pscc.sim.config import SIM_HINGE_DEGENERACY_RATIO, SolverConfig
 from pscc.sim.contact_springs import ContactSprings
 from pscc.sim.materials import bending_energy, membrane_energy
 from pscc.sim.model import VERTEX_FREE, VERTEX_SCRIPTED, ClothModel, FaceArrays, HingeArrays, VertexArrays
+from pscc.sim.pcg import PreconditionedConjugateGradient
 from pscc.sim.state import ClothState
 
 wp.set_module_options({"enable_backward": False})
@@ -233,12 +233,10 @@ class ImplicitEuler:
         self._diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
         self._inverse_diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
         self._energies = wp.zeros(4, dtype=wp.float64, device=self.device)
-        preconditioner = None
-        if self.config.preconditioner != "none":
-            preconditioner = LinearOperator((n, n), wp.mat33, self.device, self._apply_preconditioner)
-        self._solver = cg(self.system.matrix, self.system.rhs, self.dv, tol=self.config.cg_tolerance, atol=0.0,
-                          maxiter=self.config.cg_max_iterations, M=preconditioner,
-                          check_every=self.config.cg_check_every, run=False)
+        precondition = self._precondition if self.config.preconditioner != "none" else None
+        self._solver = PreconditionedConjugateGradient(
+            self.system.matrix, self.system.rhs, self.dv, self.config.cg_tolerance, self.config.cg_max_iterations,
+            self.config.cg_check_every, precondition)
 
     def step(self, state_in: ClothState, state_out: ClothState, dt: float, contacts: ContactSprings | None = None,
              handle_targets: Any = None) -> StepStats:
@@ -365,9 +363,10 @@ class ImplicitEuler:
         params.hinge_degeneracy_ratio = SIM_HINGE_DEGENERACY_RATIO
         return params
 
-    def _apply_preconditioner(self, x: wp.array, y: wp.array, z: wp.array, alpha: float, beta: float) -> None:
+    def _precondition(self, r: wp.array, z: wp.array) -> None:
+        """z = P^-1 r with the inverted diagonal blocks (or scalar diagonal)."""
         wp.launch(_apply_block_diagonal, dim=self.model.vertex_count, device=self.device,
-                  inputs=[self._inverse_diagonal, x, y, float(alpha), float(beta)], outputs=[z])
+                  inputs=[self._inverse_diagonal, r, r, 1.0, 0.0], outputs=[z])
 
     def _check_state(self, state: ClothState, name: str) -> None:
         if not isinstance(state, ClothState):
