@@ -21,7 +21,8 @@ class Scene:
         faces: (m, 3) int32 cloth triangles.
         rest: (n, 2) float32 material (flat rest) coordinates [m].
         object_ids: (m,) int32 cloth piece of each face.
-        material: the cloth material (all pieces).
+        material: the cloth material of every piece, or a list indexed by ``object_ids`` (one
+            material per piece). The contact distance is the largest thickness.
         solver: integration settings.
         handles: prescribed cloth vertices (pins and scripted ends).
         obstacles: animated rigid obstacles.
@@ -35,7 +36,7 @@ class Scene:
     faces: np.ndarray
     rest: np.ndarray
     object_ids: np.ndarray
-    material: ClothMaterial = field(default_factory=ClothMaterial)
+    material: ClothMaterial | list[ClothMaterial] = field(default_factory=ClothMaterial)
     solver: SolverConfig = field(default_factory=SolverConfig)
     handles: list[Handle] = field(default_factory=list)
     obstacles: list[Obstacle] = field(default_factory=list)

@@ -93,7 +93,11 @@ class ClothSolver:
     def __init__(self, scene: Scene, *, device: str | None = None, contact: ContactConfig | None = None) -> None:
         self.scene = scene
         self.contact = (contact if contact is not None else ContactConfig()).validate()
-        material = scene.material.validate()
+        per_object = isinstance(scene.material, list | tuple)
+        materials = [m.validate() for m in scene.material] if per_object else [scene.material.validate()]
+        if per_object and (not materials or int(np.max(scene.object_ids, initial=0)) >= len(materials)):
+            raise InputError(scene.name, "material", f"{len(materials)} materials for object ids up to "
+                             f"{int(np.max(scene.object_ids, initial=0))}", "give one material per cloth piece")
         self.device = wp.get_device(device)
         self.time = 0.0
         cloth_count = int(scene.vertices.shape[0])
@@ -118,7 +122,9 @@ class ClothSolver:
         all_handles = np.concatenate(handle_ids + obstacle_ids) if handle_ids or obstacle_ids else None
         if all_handles is not None and np.unique(all_handles).size != all_handles.size:
             raise InputError(scene.name, "handles", "a vertex belongs to two handles", "list each vertex in one handle")
-        self.model = ClothModel(vertices, scene.faces, rest=rest_all, materials=material, object_ids=None,
+        self.model = ClothModel(vertices, scene.faces, rest=rest_all,
+                                materials=materials if per_object else materials[0],
+                                object_ids=scene.object_ids if per_object else None,
                                 handles=all_handles, device=self.device)
         self.integrator = ImplicitEuler(self.model, scene.solver, self.device)
         n = self.model.vertex_count
@@ -148,7 +154,7 @@ class ClothSolver:
         self.detector = CollisionDetector(self.collision_faces, method=self.contact.method,
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
                                           device=str(self.device))
-        self.thickness = float(material.thickness)
+        self.thickness = max(float(m.thickness) for m in materials)
         if self.thickness <= 0.0:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
         self.ccd_distance = self.contact.ccd_distance_ratio * self.thickness

@@ -151,3 +151,20 @@ def test_contact_buffers_grow_under_heavy_contact() -> None:
         most = max(most, stats["counts"]["contacts"])
     assert most > first_capacity
     assert solver.proximity.springs.capacity >= most
+
+
+def test_per_object_materials_and_wind() -> None:
+    from pscc.sim.config import ClothMaterial, SolverConfig
+
+    scene = build_scene("stack", 150)
+    soft = ClothMaterial(stretch_u=200.0, stretch_v=200.0, stretch_uv=20.0, shear=60.0, thickness=0.003)
+    scene.material = [ClothMaterial(), soft, ClothMaterial()]
+    scene.solver = SolverConfig(wind=(2.0, 0.0, 0.0), air_drag=0.5)
+    solver, checker, history = _run(scene, 8)
+    assert solver.thickness == 0.003  # the largest thickness is the contact distance
+    stiffness = solver.model.faces.stiffness.numpy()
+    object_ids = scene.object_ids
+    assert np.allclose(stiffness[object_ids == 1, 0], 200.0) and np.allclose(stiffness[object_ids == 0, 0], 1000.0)
+    scene.material = [ClothMaterial()]  # pieces 1 and 2 have no material
+    with pytest.raises(InputError, match="material"):
+        ClothSolver(scene, device="cpu")
