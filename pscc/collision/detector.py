@@ -180,6 +180,38 @@ class CollisionDetector:
             self._setup(x0.shape[0], x0)
         return x0, x1, h
 
+    def prepare(self, positions: Any) -> None:
+        """Validate the faces against ``positions`` and build every structure now, instead of on the
+        first call (nothing is detected; the ``pscc`` front stays at its roots).
+
+        Raises:
+            InputError: bad positions or faces.
+        """
+        self._inputs(positions, None, 0.0)
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The state a detector carries between calls: the ``pscc`` test front (empty otherwise).
+
+        Restoring it (:meth:`load_state_dict`) into a detector over the same mesh makes later calls
+        return exactly what this one's would. Call :meth:`prepare` or a detection first.
+        """
+        if self.front is None:
+            return {}
+        return {f"front_{key}": value for key, value in self.front.state_dict().items()}
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`state_dict` output; the detector must be prepared (:meth:`prepare`).
+
+        Raises:
+            InputError: the detector is not prepared, or the state does not fit it.
+        """
+        front_state = {key[len("front_"):]: value for key, value in state.items() if key.startswith("front_")}
+        if self.method == "pscc" and self.front is None:
+            raise InputError("checkpoint", "detector", "the detector is not prepared",
+                             "call prepare(positions) before load_state_dict()")
+        if self.front is not None and front_state:
+            self.front.load_state_dict(front_state)
+
     def broad_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> dict[str, Any]:
         """Find candidate feature pairs from boxes over [positions, positions_end] grown by ``thickness``.
 

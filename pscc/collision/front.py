@@ -39,6 +39,7 @@ import warp as wp
 
 from pscc import tolerances
 from pscc.collision.bvh import MaterialBvh, MaterialBvhArrays
+from pscc.errors import InputError
 from pscc.geometry import normal_cone as nc
 
 wp.set_module_options({"enable_backward": False})
@@ -320,6 +321,32 @@ class NormalConeFront:
                   self._sort_keys, self._sort_values, self.in_front, self._lifted, self.node_id, self.directions,
                   self.direction_table)
         return sum(a.capacity for a in arrays)
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """What the front carries from call to call (its nodes and the call counter), as host arrays.
+
+        Everything else is recomputed by :meth:`update`, so restoring this into a front over the
+        same BVH makes later calls return exactly what the original front would (checkpoints).
+        Allocates: yes (host copies). Capture-safe: no.
+        """
+        return {"front": self.front.numpy()[: self.front_size].copy(),
+                "calls": np.array([self.calls], dtype=np.int64)}
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`state_dict` output (from a front over the same BVH).
+
+        Raises:
+            InputError: node ids outside this BVH or more nodes than it can hold.
+        Allocates: no. Capture-safe: no.
+        """
+        nodes = np.asarray(state["front"], dtype=np.int32).reshape(-1)
+        n = self.bvh.node_count
+        if nodes.size == 0 or nodes.size > n or nodes.min() < 0 or nodes.max() >= n:
+            raise InputError("checkpoint", "front", f"{nodes.size} node ids do not fit a BVH of {n} nodes",
+                             "restore a checkpoint of the same scene")
+        self.front.assign(np.concatenate([nodes, np.zeros(n - nodes.size, np.int32)]))
+        self.front_size = int(nodes.size)
+        self.calls = int(np.asarray(state["calls"]).reshape(-1)[0])
 
     def update(self, positions_t0: wp.array, positions_t1: wp.array | None = None) -> wp.array:
         """Refit, shrink (every ``shrink_interval`` calls), sprout, and assign node ids.

@@ -166,6 +166,7 @@ class ClothSolver:
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
 
+        self.detector.prepare(vertices)
         initial = self.intersection_check.find(vertices)
         if initial.shape[0] and not self.contact.allow_initial_intersections:
             edge, face = (int(v) for v in initial[0][:2])
@@ -197,6 +198,60 @@ class ClothSolver:
         springs = self.proximity.springs
         contact = springs.vertices.capacity + springs.weights.capacity + springs.normals.capacity
         return {"collision": int(collision["total"]), "contact_springs": int(contact)}
+
+    def state_dict(self, state: ClothState) -> dict[str, np.ndarray]:
+        """Everything a later step depends on, as host arrays (for checkpoints).
+
+        That is the state (positions, velocities), the simulated time, the integrator's warm start,
+        the contact springs of the last DCD and the detector's normal cone test front. Restoring it
+        with :meth:`load_state_dict` into a solver of the same scene continues bit for bit as the
+        original would on the CPU.
+        """
+        springs = self.proximity.springs
+        count = springs.host_count
+        return {
+            "time": np.array([self.time], dtype=np.float64),
+            # Copies: on the CPU, .numpy() is a view that later steps would overwrite.
+            "positions": state.positions.numpy().copy(),
+            "velocities": state.velocities.numpy().copy(),
+            "warm_start": self.integrator.dv.numpy().copy(),
+            "spring_vertices": springs.vertices.numpy()[:count].copy(),
+            "spring_weights": springs.weights.numpy()[:count].copy(),
+            "spring_normals": springs.normals.numpy()[:count].copy(),
+            **{f"detector_{key}": value for key, value in self.detector.state_dict().items()},
+        }
+
+    def load_state_dict(self, data: dict[str, np.ndarray], state: ClothState) -> None:
+        """Restore :meth:`state_dict` output into this solver and ``state``.
+
+        Raises:
+            InputError: arrays missing or of the wrong shape (a checkpoint of another scene).
+        """
+        n = self.model.vertex_count
+        for key in ("time", "positions", "velocities", "warm_start", "spring_vertices", "spring_weights",
+                    "spring_normals"):
+            if key not in data:
+                raise InputError("checkpoint", key, "is missing", "resume from a checkpoint written by pscc simulate")
+        for key in ("positions", "velocities", "warm_start"):
+            if np.shape(data[key]) != (n, 3):
+                raise InputError("checkpoint", key, f"shape {np.shape(data[key])} is not ({n}, 3)",
+                                 "resume with the scene and size the checkpoint was written for")
+        count = int(np.shape(data["spring_vertices"])[0])
+        state.positions.assign(np.asarray(data["positions"], np.float32))
+        state.velocities.assign(np.asarray(data["velocities"], np.float32))
+        self.integrator.dv.assign(np.asarray(data["warm_start"], np.float32))
+        springs = self.proximity.springs
+        springs.ensure(count)
+        for name in ("vertices", "weights", "normals"):
+            buffer = getattr(springs, name)
+            rows = np.asarray(data[f"spring_{name}"]).reshape(count, -1)
+            padded = np.zeros((buffer.shape[0], rows.shape[1]), dtype=buffer.numpy().dtype)
+            padded[:count] = rows
+            buffer.assign(padded)
+        springs.set_count(count)
+        self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()
+                                       if key.startswith("detector_")})
+        self.time = float(np.asarray(data["time"]).reshape(-1)[0])
 
     def step(self, state_in: ClothState, state_out: ClothState, dt: float) -> dict[str, Any]:
         """Advance ``state_in`` by ``dt`` [s] into ``state_out``; the result is intersection-free.
