@@ -119,12 +119,12 @@ def _simulate(args: argparse.Namespace) -> int:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
     scene = build_scene(args.scene, args.triangles)
     out_dir = Path(args.out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(str(out_dir), "--out-dir", "exists and is not a folder", "pick another path")
     print(f"{scene.name}: {scene.description}; {scene.faces.shape[0]:,} cloth triangles, "
           f"{sum(o.faces.shape[0] for o in scene.obstacles):,} obstacle triangles, dt = {scene.time_step:.4g} s")
     simulation = Simulation(scene, device=args.device, contact=ContactConfig(method=args.method))
-    stats = simulation.run(args.frames, out_dir, progress=not args.no_progress)
+    identity = {"scene": args.scene, "cloth_triangles": int(scene.faces.shape[0]), "method": args.method}
+    stats = simulation.run(args.frames, out_dir, progress=not args.no_progress, identity=identity,
+                           resume=args.resume, overwrite=args.overwrite, checkpoint_every=args.checkpoint_every)
     per_frame = [f["seconds_total"] for f in stats["frames"]]
     print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / len(per_frame):.2f} s per frame) "
           f"on {stats['device']}")
@@ -167,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--method", default=METHODS[0], choices=METHODS, help="collision detection method")
     simulate.add_argument("--out-dir", default="simulation-output", help="folder for frames/ and stats.json")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    simulate.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its checkpoint")
+    simulate.add_argument("--overwrite", action="store_true", help="replace another run's output in --out-dir")
+    simulate.add_argument("--checkpoint-every", type=int, default=10, help="frames between checkpoints")
     simulate.set_defaults(run=_simulate)
     return parser
 

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pscc.errors import InputError
 from pscc.io.frames import write_frame, write_json_atomic
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.scene import Scene
@@ -55,23 +56,62 @@ class Simulation:
         return write_frame(out_dir, self.frame, self.state.positions.numpy(), self.scene.faces,
                            self.scene.object_ids, obstacle_vertices, obstacle_faces)
 
-    def run(self, frames: int, out_dir: Path, progress: bool = True) -> dict[str, Any]:
-        """Write frame 0 (the initial state) and ``frames`` simulated frames, then ``stats.json``.
+    def checkpoint_state(self) -> dict[str, Any]:
+        """Solver state plus the frame counter (see :meth:`ClothSolver.state_dict`)."""
+        return self.solver.state_dict(self.state)
+
+    def run(self, frames: int, out_dir: Path, progress: bool = True, *, identity: dict[str, Any] | None = None,
+            resume: bool = False, overwrite: bool = False, checkpoint_every: int = 10) -> dict[str, Any]:
+        """Simulate up to frame ``frames``, writing frame files, checkpoints and ``stats.json``.
+
+        A new run writes frame 0 (the initial state) and frames 1..``frames``. With ``resume`` the
+        run continues from the folder's last checkpoint (frames after it are written again, equal
+        on the CPU to those an uninterrupted run writes). See :class:`pscc.io.run_folder.RunFolder`
+        for the folder rules.
+
+        Args:
+            frames: last frame to write.
+            out_dir: output folder.
+            progress: show a progress bar with ETA and live counts.
+            identity: what makes two runs the same run (default: scene name and sizes).
+            resume: continue the run in ``out_dir`` from its checkpoint.
+            overwrite: replace another run's output in ``out_dir``.
+            checkpoint_every: frames between checkpoints (>= 1).
 
         Returns:
             The stats written to ``out_dir/stats.json``.
+
+        Raises:
+            InputError: the folder rules refuse ``out_dir``, or ``checkpoint_every`` < 1.
         """
+        from pscc.io.run_folder import RunFolder
+
+        if checkpoint_every < 1:
+            raise InputError("argument", "--checkpoint-every", f"{checkpoint_every} is below 1", "pass 1 or more")
+        if identity is None:
+            identity = {"scene": self.scene.name, "cloth_triangles": int(self.scene.faces.shape[0])}
+        folder = RunFolder(Path(out_dir), identity)
+        folder.prepare(resume=resume, overwrite=overwrite)
         out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        self.write_frame(out_dir)
+        if resume:
+            state, frame, frame_stats = folder.load_checkpoint()
+            self.solver.load_state_dict(state, self.state)
+            self.frame = frame
+            self.frame_stats = frame_stats
+        else:
+            self.write_frame(out_dir)
+            folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
         bar = None
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=frames, unit="frame", desc=self.scene.name, dynamic_ncols=True)
-        for _ in range(frames):
+            bar = tqdm(total=frames, initial=min(self.frame, frames), unit="frame", desc=self.scene.name,
+                       dynamic_ncols=True)
+        while self.frame < frames:
             record = self.step_frame()
             self.write_frame(out_dir)
+            if self.frame % checkpoint_every == 0 or self.frame == frames:
+                folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
             if bar is not None:
                 bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
                                 halvings=record["counts"]["halvings"], refresh=False)

@@ -244,8 +244,9 @@ class ClothSolver:
         springs.ensure(count)
         for name in ("vertices", "weights", "normals"):
             buffer = getattr(springs, name)
-            rows = np.asarray(data[f"spring_{name}"]).reshape(count, -1)
-            padded = np.zeros((buffer.shape[0], rows.shape[1]), dtype=buffer.numpy().dtype)
+            width = {"vertices": 4, "weights": 4, "normals": 3}[name]
+            rows = np.asarray(data[f"spring_{name}"]).reshape(count, width)
+            padded = np.zeros((buffer.shape[0], width), dtype=np.int32 if name == "vertices" else np.float32)
             padded[:count] = rows
             buffer.assign(padded)
         springs.set_count(count)
