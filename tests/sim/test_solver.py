@@ -210,3 +210,44 @@ def test_checkpoint_of_another_scene_is_refused() -> None:
     data = other.state_dict(other.initial_state())
     with pytest.raises(InputError, match="positions"):
         solver.load_state_dict(data, solver.initial_state())
+
+
+def test_rejected_steps_are_halved_and_stay_intersection_free(monkeypatch: pytest.MonkeyPatch) -> None:
+    scene = build_scene("drape", 200)
+    scene.vertices = scene.vertices - np.array([0, 0, 0.09], np.float32)
+    solver = ClothSolver(scene, device="cpu")
+    checker = _Checker(solver)
+    real_find = solver.intersection_check.find
+    calls = {"n": 0}
+
+    def flaky_find(positions):
+        calls["n"] += 1
+        if calls["n"] == 3:  # pretend the third end state crosses: that attempt must be rejected
+            return np.array([[0, 0]], dtype=np.int32)
+        return real_find(positions)
+
+    monkeypatch.setattr(solver.intersection_check, "find", flaky_find)
+    state, other = solver.initial_state(), solver.initial_state()
+    halvings = 0
+    for _ in range(4):
+        stats = solver.step(state, other, scene.time_step)
+        state, other = other, state
+        checker.check(state, solver.time)
+        halvings += stats["counts"]["halvings"]
+    assert halvings == 1
+    assert solver.time == pytest.approx(4 * scene.time_step)
+
+
+def test_a_step_that_cannot_be_fixed_stops_with_an_error() -> None:
+    from pscc.sim.solver import SimulationError
+
+    scene = build_scene("twist", 300)
+    for handle in scene.handles:
+        handle.motion = (lambda m: (lambda t: m(4.0 * t)))(handle.motion)
+    contact = ContactConfig(max_response_rounds=1, impulse_rounds=0, max_step_halvings=0)
+    solver = ClothSolver(scene, device="cpu", contact=contact)
+    state, other = solver.initial_state(), solver.initial_state()
+    with pytest.raises(SimulationError, match="halvings"):
+        for _ in range(120):
+            solver.step(state, other, scene.time_step)
+            state, other = other, state
