@@ -111,12 +111,14 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from pscc.io.formats import parse_formats
     from pscc.scenes import build_scene
     from pscc.sim.contact_config import ContactConfig
     from pscc.sim.simulation import Simulation
 
     if args.frames < 1:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
+    formats = parse_formats(args.format)
     scene = build_scene(args.scene, args.triangles)
     out_dir = Path(args.out_dir)
     print(f"{scene.name}: {scene.description}; {scene.faces.shape[0]:,} cloth triangles, "
@@ -124,11 +126,21 @@ def _simulate(args: argparse.Namespace) -> int:
     simulation = Simulation(scene, device=args.device, contact=ContactConfig(method=args.method))
     identity = {"scene": args.scene, "cloth_triangles": int(scene.faces.shape[0]), "method": args.method}
     stats = simulation.run(args.frames, out_dir, progress=not args.no_progress, identity=identity,
-                           resume=args.resume, overwrite=args.overwrite, checkpoint_every=args.checkpoint_every)
+                           resume=args.resume, overwrite=args.overwrite, checkpoint_every=args.checkpoint_every,
+                           formats=formats)
     per_frame = [f["seconds_total"] for f in stats["frames"]]
     print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / len(per_frame):.2f} s per frame) "
           f"on {stats['device']}")
-    print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{len(per_frame):05d}.npz and {out_dir}/stats.json")
+    print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{args.frames:05d}.npz and {out_dir}/stats.json")
+    for name, where in (("obj", "obj/frame_*.obj"), ("ply", "ply/frame_*.ply"), ("usd", "animation.usd")):
+        if name in formats:
+            print(f"Wrote {out_dir}/{where}")
+    if args.render:
+        from pscc.render.video import render_run
+
+        preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=args.device,
+                                    progress=not args.no_progress)
+        print(f"Rendered {preview} and {video}")
     return 0
 
 
@@ -170,6 +182,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its checkpoint")
     simulate.add_argument("--overwrite", action="store_true", help="replace another run's output in --out-dir")
     simulate.add_argument("--checkpoint-every", type=int, default=10, help="frames between checkpoints")
+    simulate.add_argument("--format", default="npz",
+                          help="comma-separated output formats: npz (always written), obj, ply, usd")
+    simulate.add_argument("--render", action="store_true", help="render preview.png and animation.mp4")
     simulate.set_defaults(run=_simulate)
     return parser
 

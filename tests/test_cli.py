@@ -114,6 +114,7 @@ def test_simulate_writes_frames_and_stats(tmp_path: Path, capsys) -> None:
     assert [f.name for f in frames] == ["frame_00000.npz", "frame_00001.npz", "frame_00002.npz"]
     with np.load(frames[-1]) as frame:
         assert set(frame.files) == {"vertices", "faces", "object_ids", "obstacle_vertices", "obstacle_faces"}
+        assert frame["vertices"].shape[0] == frame["faces"].max() + 1  # cloth vertices only
         assert frame["vertices"].dtype == np.float32 and frame["vertices"].shape[1] == 3
         assert frame["faces"].shape == (frame["object_ids"].shape[0], 3)
         assert frame["obstacle_faces"].shape[0] > 0 and frame["obstacle_vertices"].dtype == np.float32
@@ -134,8 +135,26 @@ def test_simulate_without_obstacles_writes_empty_obstacle_arrays(tmp_path: Path)
         assert frame["obstacle_vertices"].shape == (0, 3) and frame["obstacle_faces"].shape == (0, 3)
 
 
+def test_simulate_all_formats_and_render(tmp_path: Path) -> None:
+    from pscc.io.formats import read_obj_frame, read_ply_frame, read_usd_frames
+
+    out = tmp_path / "run"
+    assert main(["simulate", "drape", "--frames", "2", "--triangles", "100", "--out-dir", str(out), "--no-progress",
+                 "--format", "npz,obj,ply,usd", "--render"]) == 0
+    with np.load(out / "frames" / "frame_00002.npz") as frame:
+        expected = frame["vertices"]
+        obstacles = frame["obstacle_vertices"]
+    np.testing.assert_array_equal(read_obj_frame(out / "obj" / "frame_00002.obj")["vertices"], expected)
+    np.testing.assert_array_equal(read_ply_frame(out / "ply" / "frame_00002.ply")["obstacle_vertices"], obstacles)
+    usd = read_usd_frames(out / "animation.usd")
+    assert len(usd) == 3
+    np.testing.assert_array_equal(usd[2][0], expected)
+    assert (out / "preview.png").stat().st_size > 0 and (out / "animation.mp4").stat().st_size > 0
+
+
 @pytest.mark.parametrize("arguments, message", [
     (["--frames", "0"], "--frames"),
+    (["--format", "npz,fbx"], "--format"),
     (["--triangles", "3"], "triangles"),
 ])
 def test_simulate_bad_options_exit_2_and_write_nothing(tmp_path: Path, arguments, message, capsys) -> None:

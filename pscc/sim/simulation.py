@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from pscc.errors import InputError
+from pscc.io.formats import FrameWriter, parse_formats
 from pscc.io.frames import write_frame, write_json_atomic
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.scene import Scene
@@ -53,15 +54,27 @@ class Simulation:
     def write_frame(self, out_dir: Path) -> Path:
         """Write the current state as frame ``self.frame`` (the NPZ contract of ``pscc.io.frames``)."""
         obstacle_vertices, obstacle_faces = self.solver.obstacle_mesh(self.time)
-        return write_frame(out_dir, self.frame, self.state.positions.numpy(), self.scene.faces,
-                           self.scene.object_ids, obstacle_vertices, obstacle_faces)
+        cloth = self.state.positions.numpy()[: self.solver.cloth_vertex_count]
+        return write_frame(out_dir, self.frame, cloth, self.scene.faces, self.scene.object_ids, obstacle_vertices,
+                           obstacle_faces)
+
+    def _frame_writer(self, out_dir: Path, formats: tuple[str, ...], resume_from: int | None) -> FrameWriter:
+        _, obstacle_faces = self.solver.obstacle_mesh(0.0)
+        return FrameWriter(out_dir, formats, self.scene.faces, self.scene.object_ids, obstacle_faces,
+                           fps=1.0 / self.scene.frame_time, resume_from=resume_from)
+
+    def _write_current(self, writer: FrameWriter) -> None:
+        obstacle_vertices, _ = self.solver.obstacle_mesh(self.time)
+        cloth = self.state.positions.numpy()[: self.solver.cloth_vertex_count]
+        writer.write(self.frame, cloth, obstacle_vertices)
 
     def checkpoint_state(self) -> dict[str, Any]:
         """Solver state plus the frame counter (see :meth:`ClothSolver.state_dict`)."""
         return self.solver.state_dict(self.state)
 
     def run(self, frames: int, out_dir: Path, progress: bool = True, *, identity: dict[str, Any] | None = None,
-            resume: bool = False, overwrite: bool = False, checkpoint_every: int = 10) -> dict[str, Any]:
+            resume: bool = False, overwrite: bool = False, checkpoint_every: int = 10,
+            formats: tuple[str, ...] = ("npz",)) -> dict[str, Any]:
         """Simulate up to frame ``frames``, writing frame files, checkpoints and ``stats.json``.
 
         A new run writes frame 0 (the initial state) and frames 1..``frames``. With ``resume`` the
@@ -77,6 +90,8 @@ class Simulation:
             resume: continue the run in ``out_dir`` from its checkpoint.
             overwrite: replace another run's output in ``out_dir``.
             checkpoint_every: frames between checkpoints (>= 1).
+            formats: output formats (:data:`pscc.io.formats.FORMATS`); NPZ frames are always written
+                (checkpoints and ``--resume`` rely on them).
 
         Returns:
             The stats written to ``out_dir/stats.json``.
@@ -93,13 +108,16 @@ class Simulation:
         folder = RunFolder(Path(out_dir), identity)
         folder.prepare(resume=resume, overwrite=overwrite)
         out_dir = Path(out_dir)
+        formats = tuple(dict.fromkeys(("npz", *parse_formats(formats))))
         if resume:
             state, frame, frame_stats = folder.load_checkpoint()
             self.solver.load_state_dict(state, self.state)
             self.frame = frame
             self.frame_stats = frame_stats
+            writer = self._frame_writer(out_dir, formats, frame + 1)
         else:
-            self.write_frame(out_dir)
+            writer = self._frame_writer(out_dir, formats, None)
+            self._write_current(writer)
             folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
         bar = None
         if progress:
@@ -109,13 +127,14 @@ class Simulation:
                        dynamic_ncols=True)
         while self.frame < frames:
             record = self.step_frame()
-            self.write_frame(out_dir)
+            self._write_current(writer)
             if self.frame % checkpoint_every == 0 or self.frame == frames:
                 folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
             if bar is not None:
                 bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
                                 halvings=record["counts"]["halvings"], refresh=False)
                 bar.update(1)
+        writer.close()
         if bar is not None:
             bar.close()
         stats = self.summary()
