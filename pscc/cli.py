@@ -84,29 +84,41 @@ def _detect(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from pscc.collision.detector import CollisionDetector
-    from pscc.mesh.generate import folded_sheet
+DEMO_CPU_TRIANGLES = 3000
+"""Cloth triangles of the demo scene on a CPU (about a minute on 2 cores)."""
 
+DEMO_GPU_TRIANGLES = 200_000
+"""Cloth triangles of the demo scene on a GPU (the paper's resolution for its cloth scenes)."""
+
+
+def _demo(args: argparse.Namespace) -> int:
+    import warp as wp
+
+    from pscc.render.video import render_run
+    from pscc.scenes import build_scene
+    from pscc.sim.simulation import Simulation
+
+    device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
+    on_gpu = wp.get_device(device).is_cuda
+    triangles = args.triangles or (DEMO_GPU_TRIANGLES if on_gpu else DEMO_CPU_TRIANGLES)
+    if args.frames < 1:
+        raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
+    scene = build_scene(args.scene, triangles)
     out_dir = Path(args.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    print(f"Generating a three-layer folded cloth of about {args.triangles:,} triangles ...")
-    mesh = folded_sheet(args.triangles, layers=3, seed=0)
-    detector = CollisionDetector(mesh.faces, method=args.method, rest=mesh.rest, device=args.device)
-    print("Continuous collision detection over one step (start -> end positions):")
-    ccd = detector.detect(mesh.vertices, mesh.vertices_end, thickness=0.0)
-    _print_summary(ccd.stats)
-    thickness = float(args.thickness)
-    print(f"\nDiscrete proximity detection at the end of the step (thickness {thickness:g}):")
-    dcd = detector.detect(mesh.vertices_end, thickness=thickness)
-    _print_summary(dcd.stats)
-    _write_npz_atomic(out_dir / "ccd_pairs.npz", _result_arrays(ccd))
-    _write_npz_atomic(out_dir / "dcd_pairs.npz", _result_arrays(dcd))
-    _write_npz_atomic(out_dir / "mesh.npz", {"vertices": mesh.vertices, "faces": mesh.faces,
-                                             "vertices_end": mesh.vertices_end, "rest": mesh.rest})
-    stats_path = out_dir / "stats.json"
-    stats_path.write_text(json.dumps({"ccd": ccd.stats, "dcd": dcd.stats}, indent=2))
-    print(f"\nWrote {out_dir}/mesh.npz, ccd_pairs.npz, dcd_pairs.npz and stats.json")
+    print(f"pscc demo on {device}: scene '{scene.name}' ({scene.description}), "
+          f"{scene.faces.shape[0]:,} cloth triangles, {args.frames} frames at {1.0 / scene.frame_time:g} fps")
+    simulation = Simulation(scene, device=device)
+    identity = {"scene": scene.name, "cloth_triangles": int(scene.faces.shape[0]), "demo": True}
+    stats = simulation.run(args.frames, out_dir, progress=not args.no_progress, identity=identity, overwrite=True)
+    per_frame = [f["seconds_total"] for f in stats["frames"]]
+    print(f"Simulated {len(per_frame)} frames in {sum(per_frame):.1f} s "
+          f"({sum(per_frame) / len(per_frame):.2f} s per frame), every frame intersection-free")
+    preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=device, progress=not args.no_progress)
+    print("Outputs:")
+    print(f"  frames   {out_dir}/frames/frame_00000.npz ... frame_{args.frames:05d}.npz")
+    print(f"  picture  {preview}")
+    print(f"  video    {video}")
+    print(f"  stats    {out_dir}/stats.json")
     return 0
 
 
@@ -161,15 +173,18 @@ def build_parser() -> argparse.ArgumentParser:
     detect.add_argument("--json", action="store_true", help="print the stats as one JSON line")
     detect.set_defaults(run=_detect)
 
-    demo = sub.add_parser("demo", help="detect collisions on a generated folded cloth and print stats")
-    demo.add_argument("--triangles", type=int, default=20000, help="triangles of the cloth (default 20000)")
-    demo.add_argument("--thickness", type=float, default=0.005, help="proximity distance for DCD")
-    demo.add_argument("--method", default=METHODS[0], choices=METHODS, help="detection method")
-    demo.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
-    demo.add_argument("--out-dir", default="demo-output", help="folder for the outputs")
-    demo.set_defaults(run=_demo)
-
     from pscc.scenes.builtin import SCENES
+
+    demo = sub.add_parser("demo", help="simulate a default scene sized for this machine; write frames, a picture, "
+                                       "a video and stats")
+    demo.add_argument("--scene", default="drape", choices=sorted(SCENES), help="scene (default drape)")
+    demo.add_argument("--frames", type=int, default=45, help="frames to simulate (default 45)")
+    demo.add_argument("--triangles", type=int, default=None,
+                      help=f"cloth triangles (default {DEMO_CPU_TRIANGLES} on a CPU, {DEMO_GPU_TRIANGLES} on a GPU)")
+    demo.add_argument("--device", default=None, help="Warp device (default: cuda:0 when present, else cpu)")
+    demo.add_argument("--out-dir", default="demo-output", help="folder for the outputs (replaced)")
+    demo.add_argument("--no-progress", action="store_true", help="no progress bars")
+    demo.set_defaults(run=_demo)
 
     simulate = sub.add_parser("simulate", help="simulate a built-in scene; write NPZ frames and stats.json")
     simulate.add_argument("scene", choices=sorted(SCENES), help="scene to simulate")

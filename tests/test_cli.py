@@ -98,11 +98,15 @@ def test_bad_options(tmp_path: Path, sheet, capsys) -> None:
     assert "device" in capsys.readouterr().err
 
 
-def test_demo_writes_outputs(tmp_path: Path, capsys) -> None:
-    assert main(["demo", "--triangles", "400", "--out-dir", str(tmp_path)]) == 0
-    assert {"mesh.npz", "ccd_pairs.npz", "dcd_pairs.npz", "stats.json"} <= {p.name for p in tmp_path.iterdir()}
-    stats = json.loads((tmp_path / "stats.json").read_text())
-    assert stats["ccd"]["mode"] == "ccd" and stats["dcd"]["mode"] == "dcd"
+def test_demo_writes_frames_picture_video_and_stats(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--triangles", "100", "--frames", "2", "--out-dir", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    for name in ("preview.png", "animation.mp4", "stats.json", "frame_00002.npz"):
+        assert name in printed
+    assert (out / "preview.png").stat().st_size > 0 and (out / "animation.mp4").stat().st_size > 0
+    assert len(json.loads((out / "stats.json").read_text())["frames"]) == 2
+    assert main(["demo", "--triangles", "100", "--frames", "1", "--out-dir", str(out), "--no-progress"]) == 0
 
 
 def test_simulate_writes_frames_and_stats(tmp_path: Path, capsys) -> None:
