@@ -257,7 +257,9 @@ class ImpactZones:
             positions_t0: (n, 3) start positions.
             positions_t1: (n, 3) current end positions.
             dt: step length [s] (the rigid velocity field is fitted to (x1 - x0) / dt).
-            group_maps: step map ``(A, b)`` (x1 = A x0 + b) of every kinematic group id.
+            group_maps: step map ``(A, b)`` (x1 = A x0 + b) of every rigid kinematic group id. A group
+                missing here moves non-rigidly (a mesh sequence): its map is the least-squares affine
+                fit to its vertices in the zone (any misfit is caught by the next CCD round).
             scale: scene size [m], for the translation tolerance of :data:`ZONE_MOTION_TOLERANCE`.
 
         Returns:
@@ -275,9 +277,10 @@ class ImpactZones:
             if free.size == 0:
                 continue
             if groups.size:
-                matrix, offset = group_maps[int(groups[0])]
-                for other in groups[1:]:
-                    other_matrix, other_offset = group_maps[int(other)]
+                maps = [group_maps[int(g)] if int(g) in group_maps
+                        else _fitted_map(x0, x1, zone[self.kinematic_group[zone] == g]) for g in groups]
+                matrix, offset = maps[0]
+                for other_matrix, other_offset in maps[1:]:
                     if (np.abs(other_matrix - matrix).max() > ZONE_MOTION_TOLERANCE
                             or np.abs(other_offset - offset).max() > ZONE_MOTION_TOLERANCE * max(scale, 1.0)):
                         raise ImpactZoneFailure(
@@ -297,3 +300,14 @@ class ImpactZones:
             omega = np.linalg.pinv(inertia, rcond=1e-12) @ momentum
             x1[zone] = x0[zone] + dt * (mean_velocity + np.cross(omega, r))
         return x1.astype(np.float32)
+
+
+def _fitted_map(x0: np.ndarray, x1: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares step map ``x1 ~ A x0 + b`` of kinematic vertices without a rigid motion
+    (minimum-norm ``A - I``, so one or two vertices give a translation)."""
+    centre = x0[members].mean(axis=0)
+    motion = x1[members] - x0[members]
+    mean = motion.mean(axis=0)
+    linear = np.linalg.lstsq(x0[members] - centre, motion - mean, rcond=None)[0].T
+    matrix = np.eye(3) + linear
+    return matrix, centre + mean - matrix @ centre

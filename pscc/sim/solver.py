@@ -167,7 +167,7 @@ class ClothSolver:
         self._scratch: dict[int, ClothState] = {}
 
         self.detector.prepare(vertices)
-        initial = self.intersection_check.find(vertices)
+        initial = self._cloth_crossings(vertices)
         if initial.shape[0] and not self.contact.allow_initial_intersections:
             edge, face = (int(v) for v in initial[0][:2])
             raise InputError(scene.name, "vertices",
@@ -304,8 +304,20 @@ class ClothSolver:
         return positions[self.model.handle_ids_host].astype(np.float32)
 
     def _group_maps(self, t: float, dt: float) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Step maps of the rigid kinematic groups; non-rigid ones (mesh sequences) are fitted per zone."""
         movers = list(self.scene.handles) + list(self.scene.obstacles)
-        return {g: step_map(m.transform(t), m.transform(t + dt)) for g, m in enumerate(movers)}
+        return {g: step_map(m.transform(t), m.transform(t + dt)) for g, m in enumerate(movers)
+                if getattr(m, "rigid", True)}
+
+    def _cloth_crossings(self, positions: np.ndarray) -> np.ndarray:
+        """Edge-face crossings that involve the cloth (obstacles may touch or overlap each other,
+        e.g. the limbs of a body at its joints)."""
+        crossings = self.intersection_check.find(positions)
+        if crossings.shape[0] == 0 or not self.scene.obstacles:
+            return crossings
+        cloth_faces = int(self.scene.faces.shape[0])
+        owners = self.intersection_check.edge_owner_faces[crossings[:, 0]]
+        return crossings[(owners < cloth_faces) | (crossings[:, 1] < cloth_faces)]
 
     def _attempt(self, state_in: ClothState, state_out: ClothState, t: float, dt: float,
                  stats: dict[str, Any]) -> None:
@@ -378,7 +390,7 @@ class ClothSolver:
 
         if self.contact.check_intersections:
             mark = time.perf_counter()
-            crossings = self.intersection_check.find(x1)
+            crossings = self._cloth_crossings(x1)
             seconds["intersection_check"] += time.perf_counter() - mark
             if crossings.shape[0]:
                 raise _StepRejected(f"the intersection check found {crossings.shape[0]} edge-face crossings")
