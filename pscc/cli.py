@@ -1,4 +1,4 @@
-"""Command-line interface: ``pscc detect``, ``pscc demo`` and ``pscc simulate`` (also ``python -m pscc``).
+"""Command-line interface: ``pscc detect``, ``demo``, ``simulate`` and ``scenes`` (also ``python -m pscc``).
 
 The CLI only parses arguments, calls the public API and prints. Any :class:`pscc.PsccError`
 becomes one line on stderr and exit status 2; nothing is written in that case.
@@ -124,26 +124,36 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     from pscc.io.formats import parse_formats
-    from pscc.scenes import build_scene
+    from pscc.io.run_folder import write_text_atomic
+    from pscc.scenes.registry import open_scene
     from pscc.sim.contact_config import ContactConfig
     from pscc.sim.simulation import Simulation
 
-    if args.frames < 1:
+    if args.frames is not None and args.frames < 1:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
     formats = parse_formats(args.format)
-    scene = build_scene(args.scene, args.triangles)
+    source = open_scene(args.scene, triangles=args.triangles, scale=args.scale)
+    scene = source.scene
+    frames = args.frames if args.frames is not None else source.frames
+    contact = source.contact or ContactConfig()
+    if args.method is not None:
+        contact = ContactConfig(**{**contact.__dict__, "method": args.method})
+    contact.validate()
     out_dir = Path(args.out_dir)
     print(f"{scene.name}: {scene.description}; {scene.faces.shape[0]:,} cloth triangles, "
           f"{sum(o.faces.shape[0] for o in scene.obstacles):,} obstacle triangles, dt = {scene.time_step:.4g} s")
-    simulation = Simulation(scene, device=args.device, contact=ContactConfig(method=args.method))
-    identity = {"scene": args.scene, "cloth_triangles": int(scene.faces.shape[0]), "method": args.method}
-    stats = simulation.run(args.frames, out_dir, progress=not args.no_progress, identity=identity,
+    simulation = Simulation(scene, device=args.device, contact=contact)
+    identity = {**source.identity, "method": contact.method}
+    resolved = source.resolved_toml(frames, contact)
+    stats = simulation.run(frames, out_dir, progress=not args.no_progress, identity=identity,
                            resume=args.resume, overwrite=args.overwrite, checkpoint_every=args.checkpoint_every,
-                           formats=formats)
+                           formats=formats, before_first_frame=lambda: write_text_atomic(out_dir / "scene.toml",
+                                                                                          resolved))
     per_frame = [f["seconds_total"] for f in stats["frames"]]
-    print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / len(per_frame):.2f} s per frame) "
-          f"on {stats['device']}")
-    print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{args.frames:05d}.npz and {out_dir}/stats.json")
+    print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / max(1, len(per_frame)):.2f} s per "
+          f"frame) on {stats['device']}")
+    print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{frames:05d}.npz, {out_dir}/stats.json and "
+          f"{out_dir}/scene.toml")
     for name, where in (("obj", "obj/frame_*.obj"), ("ply", "ply/frame_*.ply"), ("usd", "animation.usd")):
         if name in formats:
             print(f"Wrote {out_dir}/{where}")
@@ -153,6 +163,21 @@ def _simulate(args: argparse.Namespace) -> int:
         preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=args.device,
                                     progress=not args.no_progress)
         print(f"Rendered {preview} and {video}")
+    return 0
+
+
+def _scenes(args: argparse.Namespace) -> int:
+    from pscc.scenes.registry import scene_rows
+
+    rows = scene_rows()
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    for row in rows:
+        counts = ", ".join(f"{k}: {v:,}" for k, v in row["triangles"].items())
+        label = "scale" if row["kind"] == "paper" else "triangles"
+        print(f"{row['name']:<12} {row['kind']:<6} {row['description']}")
+        print(f"{'':<19} cloth triangles by {label}: {counts}")
     return 0
 
 
@@ -186,13 +211,15 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--no-progress", action="store_true", help="no progress bars")
     demo.set_defaults(run=_demo)
 
-    simulate = sub.add_parser("simulate", help="simulate a built-in scene; write NPZ frames and stats.json")
-    simulate.add_argument("scene", choices=sorted(SCENES), help="scene to simulate")
-    simulate.add_argument("--frames", type=int, default=30, help="frames to simulate (default 30)")
-    simulate.add_argument("--triangles", type=int, default=None, help="cloth triangles (default: the scene's)")
+    simulate = sub.add_parser("simulate", help="simulate a scene (a name of `pscc scenes` or a .toml file)")
+    simulate.add_argument("scene", help="built-in scene name (see `pscc scenes`) or a scene file ending in .toml")
+    simulate.add_argument("--frames", type=int, default=None, help="frames to simulate (default: the scene's)")
+    simulate.add_argument("--triangles", type=int, default=None, help="cloth triangles (built-in scenes)")
+    simulate.add_argument("--scale", type=float, default=None,
+                          help="size as a fraction of the paper's resolution (paper scenes) or of the default")
     simulate.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
-    simulate.add_argument("--method", default=METHODS[0], choices=METHODS, help="collision detection method")
-    simulate.add_argument("--out-dir", default="simulation-output", help="folder for frames/ and stats.json")
+    simulate.add_argument("--method", default=None, choices=METHODS, help="collision detection method")
+    simulate.add_argument("--out-dir", default="simulation-output", help="folder for the outputs")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
     simulate.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its checkpoint")
     simulate.add_argument("--overwrite", action="store_true", help="replace another run's output in --out-dir")
@@ -201,6 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
                           help="comma-separated output formats: npz (always written), obj, ply, usd")
     simulate.add_argument("--render", action="store_true", help="render preview.png and animation.mp4")
     simulate.set_defaults(run=_simulate)
+
+    scenes = sub.add_parser("scenes", help="list the built-in scenes with their cloth triangles per scale")
+    scenes.add_argument("--json", action="store_true", help="print the list as JSON")
+    scenes.set_defaults(run=_scenes)
     return parser
 
 

@@ -166,3 +166,47 @@ def test_simulate_bad_options_exit_2_and_write_nothing(tmp_path: Path, arguments
     assert main(["simulate", "drape", "--out-dir", str(out), "--no-progress", *arguments]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_resolved_scene_toml_reproduces_a_builtin_run(tmp_path: Path) -> None:
+    first = tmp_path / "first"
+    assert main(["simulate", "twist", "--frames", "2", "--scale", "0.05", "--out-dir", str(first),
+                 "--no-progress", "--method", "spatial-hash"]) == 0
+    resolved = (first / "scene.toml").read_text()
+    assert 'scene = "twist"' in resolved and 'method = "spatial-hash"' in resolved
+    again = tmp_path / "again"
+    assert main(["simulate", str(first / "scene.toml"), "--out-dir", str(again), "--no-progress"]) == 0
+    for name in ("frame_00001.npz", "frame_00002.npz"):
+        with np.load(first / "frames" / name) as a, np.load(again / "frames" / name) as b:
+            np.testing.assert_array_equal(a["vertices"], b["vertices"])
+
+
+def test_simulate_scene_file_and_its_resolved_copy(tmp_path: Path) -> None:
+    example = Path(__file__).resolve().parents[1] / "examples" / "drape.toml"
+    out = tmp_path / "file"
+    assert main(["simulate", str(example), "--frames", "1", "--out-dir", str(out), "--no-progress"]) == 0
+    again = tmp_path / "again"
+    assert main(["simulate", str(out / "scene.toml"), "--out-dir", str(again), "--no-progress"]) == 0
+    with np.load(out / "frames" / "frame_00001.npz") as a, np.load(again / "frames" / "frame_00001.npz") as b:
+        np.testing.assert_array_equal(a["vertices"], b["vertices"])
+
+
+def test_bad_scene_file_names_the_key(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[scene]\nname = "x"\n\n[[cloth]]\n[cloth.sheet]\nsize = [1.0, 1.0]\ncells = [4, 4]\n'
+                   '[cloth.material]\ndensty = 0.2\n')
+    out = tmp_path / "out"
+    assert main(["simulate", str(bad), "--out-dir", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "cloth[0].material.densty" in err and "density" in err
+    assert not out.exists()
+
+
+def test_scenes_lists_every_scene(capsys) -> None:
+    assert main(["scenes", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    names = {row["name"] for row in rows}
+    assert names == {"drape", "stack", "twist", "sphere", "twisting", "flag", "sphere-drop", "kungfu", "falling",
+                     "dance"}
+    sphere = next(row for row in rows if row["name"] == "sphere")
+    assert sphere["triangles"]["1"] == 200_000

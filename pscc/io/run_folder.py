@@ -39,6 +39,11 @@ def _write_bytes_atomic(path: Path, data: bytes) -> None:
         raise
 
 
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write a UTF-8 text file atomically."""
+    _write_bytes_atomic(Path(path), text.encode())
+
+
 class RunFolder:
     """One run's output folder.
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -74,7 +75,8 @@ class Simulation:
 
     def run(self, frames: int, out_dir: Path, progress: bool = True, *, identity: dict[str, Any] | None = None,
             resume: bool = False, overwrite: bool = False, checkpoint_every: int = 10,
-            formats: tuple[str, ...] = ("npz",)) -> dict[str, Any]:
+            formats: tuple[str, ...] = ("npz",),
+            before_first_frame: Callable[[], None] | None = None) -> dict[str, Any]:
         """Simulate up to frame ``frames``, writing frame files, checkpoints and ``stats.json``.
 
         A new run writes frame 0 (the initial state) and frames 1..``frames``. With ``resume`` the
@@ -92,6 +94,8 @@ class Simulation:
             checkpoint_every: frames between checkpoints (>= 1).
             formats: output formats (:data:`pscc.io.formats.FORMATS`); NPZ frames are always written
                 (checkpoints and ``--resume`` rely on them).
+            before_first_frame: called once the folder is claimed, before anything else is written
+                (``pscc simulate`` writes ``scene.toml`` there).
 
         Returns:
             The stats written to ``out_dir/stats.json``.
@@ -109,6 +113,8 @@ class Simulation:
         folder.prepare(resume=resume, overwrite=overwrite)
         out_dir = Path(out_dir)
         formats = tuple(dict.fromkeys(("npz", *parse_formats(formats))))
+        if before_first_frame is not None:
+            before_first_frame()
         if resume:
             state, frame, frame_stats = folder.load_checkpoint()
             self.solver.load_state_dict(state, self.state)
