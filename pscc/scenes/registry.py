@@ -29,7 +29,7 @@ SCENE_NAMES: tuple[str, ...] = TEST_SCENES + PAPER_SCENE_NAMES
 """Every built-in scene name."""
 
 DEFAULT_FRAMES: dict[str, int] = {"drape": 45, "stack": 45, "twist": 60, "sphere": 60, "twisting": 90, "flag": 60,
-                                  "sphere-drop": 45, "kungfu": 60, "falling": 45, "dance": 60}
+                                  "sphere-drop": 45, "kungfu": 85, "falling": 48, "dance": 72}
 """Frames of a run when ``--frames`` is not given."""
 
 
