@@ -8,6 +8,10 @@ Sections:
 3. The brute-force detector on folded three-layer cloth at 1K, 4K and 16K triangles (CCD and DCD).
 4. The broad phase: pscc against spatial hashing and Newton at 50K and 200K triangles
    (:mod:`pscc.bench.broad_phase`).
+5. The cloth simulator side by side with Newton's VBD solver on ``drape`` and ``twist``: seconds per
+   frame and frames with intersections (:mod:`pscc.bench.simulator`).
+6. The cloth simulator's seconds per stage and device memory per structure on ``drape``, ``stack`` and
+   ``twist`` (:mod:`pscc.bench.simulator`).
 
 Timings are the median of repeats after a warm-up run that compiles and loads the kernels.
 """
@@ -26,7 +30,7 @@ import numpy as np
 import warp as wp
 from tqdm import tqdm
 
-from pscc.bench import broad_phase
+from pscc.bench import broad_phase, simulator
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
 from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
@@ -126,8 +130,16 @@ def _plot_brute_force(rows: list[dict[str, Any]], path: Path) -> bool:
     return True
 
 
+def _progress(bar: Any) -> Any:
+    def update(message: str) -> None:
+        bar.set_postfix_str(message, refresh=False)
+        bar.update(1)
+
+    return update
+
+
 def write_report(results: dict[str, Any], out: Path) -> None:
-    """Write the Markdown report (and its plot) from the benchmark results."""
+    """Write the Markdown report (and its plots) from the benchmark results."""
     env = results["environment"]
     lines = [
         "# Benchmarks",
@@ -136,6 +148,25 @@ def write_report(results: dict[str, Any], out: Path) -> None:
         f"{env['cpu_count']} cores), Warp {env['warp']}, Python {env['python']}. Median of "
         f"{env['repeats']} runs after a warm-up. Raw numbers: `{out.with_suffix('.json').name}`.",
         "",
+    ]
+    if "query_sets" in results:
+        lines += _detector_lines(results, out)
+    if results.get("broad_phase"):
+        lines += broad_phase.report(results["broad_phase"])
+    if results.get("simulator"):
+        lines += simulator.report_comparison(results["simulator"])
+    if results.get("simulator_stages"):
+        stages_plot = out.parent / "docs" / "bench-sim-stages.png"
+        stages_plot.parent.mkdir(parents=True, exist_ok=True)
+        drawn = simulator.plot_breakdown(results["simulator_stages"], stages_plot)
+        lines += simulator.report_breakdown(results["simulator_stages"],
+                                            stages_plot.relative_to(out.parent).as_posix() if drawn else None)
+    out.write_text("\n".join(lines))
+
+
+def _detector_lines(results: dict[str, Any], out: Path) -> list[str]:
+    """Sections 1 to 3: CCD query sets, random CCD throughput and the brute-force detector."""
+    lines = [
         "## Conservative float32 CCD on the exact query benchmark",
         "",
         "Queries with exact rational ground truth (Wang et al. 2021, `tests/data/ccd-queries`). A false",
@@ -188,9 +219,7 @@ def write_report(results: dict[str, Any], out: Path) -> None:
     if _plot_brute_force(results["brute_force"], plot):
         lines += ["", f"![brute-force time per call]({plot.relative_to(out.parent).as_posix()})"]
     lines.append("")
-    if results.get("broad_phase"):
-        lines += broad_phase.report(results["broad_phase"])
-    out.write_text("\n".join(lines))
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -203,7 +232,22 @@ def main(argv: list[str] | None = None) -> int:
                         help="triangle counts for the brute-force detector")
     parser.add_argument("--broad-phase-sizes", type=int, nargs="*", default=[50000, 200000],
                         help="triangle counts for the broad-phase comparison (none to skip it)")
-    parser.add_argument("--no-newton", action="store_true", help="skip Newton in the broad-phase comparison")
+    parser.add_argument("--no-newton", action="store_true",
+                        help="skip Newton in the broad-phase and the simulator comparisons")
+    parser.add_argument("--simulator", choices=("full", "quick", "skip"), default="full",
+                        help="cloth simulator against Newton VBD: full (about 9 min on 2 CPU cores), quick (1 min) "
+                        "or skip")
+    parser.add_argument("--simulator-cases", nargs="+", default=None, metavar="SCENE:TRIANGLES:FRAMES",
+                        help="override the simulator comparison's cases (e.g. drape:2000:15 twist:2000:45)")
+    parser.add_argument("--stages", choices=("full", "quick", "skip"), default="full",
+                        help="cloth simulator seconds per stage and memory: full (10K and 50K, about 6 min on 2 CPU "
+                        "cores), quick (2K, 10 s) or skip")
+    parser.add_argument("--stage-sizes", type=int, nargs="+", default=None,
+                        help="override the cloth triangle counts of the per-stage breakdown")
+    parser.add_argument("--stage-frames", type=int, default=None,
+                        help="override the measured frames (after the warm-up) of the per-stage breakdown")
+    parser.add_argument("--only-simulator", action="store_true",
+                        help="run only the simulator sections (5 and 6); the report then holds only them")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
@@ -215,12 +259,27 @@ def main(argv: list[str] | None = None) -> int:
             "python": platform.python_version(), "repeats": args.repeats,
         },
     }
-    results["query_sets"] = bench_query_sets(device.alias, args.repeats)
-    results["random_queries"] = bench_random_queries(device.alias, 100_000, args.repeats)
-    results["brute_force"] = bench_brute_force(device.alias, args.sizes, args.repeats)
-    if args.broad_phase_sizes:
-        results["broad_phase"] = broad_phase.run(args.broad_phase_sizes, device.alias, args.repeats,
-                                                 with_newton=not args.no_newton)
+    if not args.only_simulator:
+        results["query_sets"] = bench_query_sets(device.alias, args.repeats)
+        results["random_queries"] = bench_random_queries(device.alias, 100_000, args.repeats)
+        results["brute_force"] = bench_brute_force(device.alias, args.sizes, args.repeats)
+        if args.broad_phase_sizes:
+            results["broad_phase"] = broad_phase.run(args.broad_phase_sizes, device.alias, args.repeats,
+                                                     with_newton=not args.no_newton)
+    if args.simulator != "skip":
+        cases = (simulator.parse_cases(args.simulator_cases) if args.simulator_cases else
+                 simulator.QUICK_COMPARISON_CASES if args.simulator == "quick" else simulator.COMPARISON_CASES)
+        with tqdm(desc="simulator vs Newton", unit="frame", leave=False) as bar:
+            results["simulator"] = simulator.run_comparison(cases, device.alias, _progress(bar),
+                                                            with_newton=not args.no_newton)
+    if args.stages != "skip":
+        quick = args.stages == "quick"
+        sizes = args.stage_sizes or (simulator.QUICK_BREAKDOWN_SIZES if quick else simulator.BREAKDOWN_SIZES)
+        frames = args.stage_frames or (simulator.QUICK_BREAKDOWN_FRAMES if quick else simulator.BREAKDOWN_FRAMES)
+        with tqdm(desc="simulator stages", unit="frame", leave=False) as bar:
+            results["simulator_stages"] = simulator.run_breakdown(list(simulator.BREAKDOWN_WARMUP), sizes,
+                                                                  simulator.BREAKDOWN_WARMUP, frames, device.alias,
+                                                                  _progress(bar))
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(results, indent=2))
     write_report(results, out)
