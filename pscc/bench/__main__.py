@@ -12,6 +12,8 @@ Sections:
    frame and frames with intersections (:mod:`pscc.bench.simulator`).
 6. The cloth simulator's seconds per stage and device memory per structure on ``drape``, ``stack`` and
    ``twist`` (:mod:`pscc.bench.simulator`).
+7. The paper's scenes: seconds per frame, stages and memory per scene on this machine's device (the
+   paper's Figure 10; :mod:`pscc.bench.scenes`).
 
 Timings are the median of repeats after a warm-up run that compiles and loads the kernels.
 """
@@ -31,6 +33,7 @@ import warp as wp
 from tqdm import tqdm
 
 from pscc.bench import broad_phase, simulator
+from pscc.bench import scenes as paper_scenes
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
 from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
@@ -161,6 +164,12 @@ def write_report(results: dict[str, Any], out: Path) -> None:
         drawn = simulator.plot_breakdown(results["simulator_stages"], stages_plot)
         lines += simulator.report_breakdown(results["simulator_stages"],
                                             stages_plot.relative_to(out.parent).as_posix() if drawn else None)
+    if results.get("paper_scenes"):
+        scenes_plot = out.parent / "docs" / "bench-paper-scenes.png"
+        scenes_plot.parent.mkdir(parents=True, exist_ok=True)
+        drawn = paper_scenes.plot_scenes(results["paper_scenes"], scenes_plot)
+        lines += paper_scenes.report_scenes(results["paper_scenes"],
+                                            scenes_plot.relative_to(out.parent).as_posix() if drawn else None)
     out.write_text("\n".join(lines))
 
 
@@ -246,6 +255,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="override the cloth triangle counts of the per-stage breakdown")
     parser.add_argument("--stage-frames", type=int, default=None,
                         help="override the measured frames (after the warm-up) of the per-stage breakdown")
+    parser.add_argument("--scenes", choices=("full", "quick", "skip"), default="full",
+                        help="the paper's scenes, seconds per frame and memory: full (whole animations at about 5K "
+                        "triangles and 4 frames at 20K, about 15 min on 2 CPU cores), quick (2 frames each) or skip")
+    parser.add_argument("--scene-names", nargs="+", default=None, metavar="SCENE",
+                        help="only these paper scenes in the scenes section")
     parser.add_argument("--only-simulator", action="store_true",
                         help="run only the simulator sections (5 and 6); the report then holds only them")
     args = parser.parse_args(argv)
@@ -280,6 +294,10 @@ def main(argv: list[str] | None = None) -> int:
             results["simulator_stages"] = simulator.run_breakdown(list(simulator.BREAKDOWN_WARMUP), sizes,
                                                                   simulator.BREAKDOWN_WARMUP, frames, device.alias,
                                                                   _progress(bar))
+    if args.scenes != "skip":
+        with tqdm(desc="paper scenes", unit="frame", leave=False) as bar:
+            results["paper_scenes"] = paper_scenes.run_scenes(device.alias, quick=args.scenes == "quick",
+                                                              names=args.scene_names, progress=_progress(bar))
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(results, indent=2))
     write_report(results, out)

@@ -30,6 +30,7 @@ import numpy as np
 import warp as wp
 
 from pscc.scenes import build_scene
+from pscc.sim.memory import warp_array_bytes
 from pscc.sim.scene import Scene
 from pscc.sim.simulation import Simulation
 
@@ -435,25 +436,18 @@ def _newton_version() -> str | None:
 # ---------------------------------------------------------------------------------------------- breakdown
 
 
-def _warp_bytes(root: Any, depth: int = 4, seen: set[int] | None = None) -> int:
-    """Bytes of every ``wp.array`` reachable from ``root``'s attributes (a few levels deep, each counted once)."""
-    seen = set() if seen is None else seen
-    if id(root) in seen:
-        return 0
-    seen.add(id(root))
-    if isinstance(root, wp.array):
-        return int(root.capacity)
-    if depth == 0 or isinstance(root, str | bytes | int | float | np.ndarray | wp.Device):
-        return 0
-    if isinstance(root, dict):
-        children = list(root.values())
-    elif isinstance(root, list | tuple):
-        children = list(root)
-    elif hasattr(root, "__dict__"):
-        children = list(vars(root).values())
-    else:
-        return 0
-    return sum(_warp_bytes(child, depth - 1, seen) for child in children)
+def solver_memory(sim: Simulation) -> dict[str, int]:
+    """Device bytes of a simulation's structures: ``collision.*`` (the detector's own accounting, with
+    ``collision.total``), ``contact_springs``, ``intersection_check``, ``integrator`` (with the model) and
+    ``states``."""
+    detector = sim.solver.detector.device_bytes()
+    memory = {f"collision.{k}": int(v) for k, v in detector.items() if k != "total"}
+    memory["collision.total"] = int(detector["total"])
+    solver = sim.solver.device_bytes()
+    for key in ("contact_springs", "impulses", "intersection_check", "integrator"):
+        memory[key] = solver[key]
+    memory["states"] = warp_array_bytes(sim.state) + warp_array_bytes(sim._next)
+    return memory
 
 
 def breakdown_scene(scene_name: str, triangles: int, warmup: int, frames: int, device: str,
@@ -484,14 +478,7 @@ def breakdown_scene(scene_name: str, triangles: int, warmup: int, frames: int, d
     row["frame_seconds"] = total
     row["counts"] = {k: statistics.fmean(r["counts"].get(k, 0) for r in records) if records else 0.0
                      for k in ("contacts", "ccd_hits", "broad_phases", "cg_iterations", "halvings", "zone_rounds")}
-    detector = sim.solver.detector.device_bytes()
-    memory = {f"collision.{k}": int(v) for k, v in detector.items() if k != "total"}
-    memory["collision.total"] = int(detector["total"])
-    memory["contact_springs"] = int(sim.solver.device_bytes()["contact_springs"])
-    memory["intersection_check"] = _warp_bytes(sim.solver.intersection_check)
-    memory["integrator"] = _warp_bytes(sim.solver.integrator) + _warp_bytes(sim.solver.model)
-    memory["states"] = _warp_bytes(sim.state) + _warp_bytes(sim._next)
-    row["device_bytes"] = memory
+    row["device_bytes"] = solver_memory(sim)
     row["wall_seconds"] = time.perf_counter() - started
     return row
 
@@ -716,8 +703,8 @@ def report_breakdown(results: dict[str, Any], plot: str | None) -> list[str]:
         "those objects hold.",
         "",
         "| scene | triangles | " + " | ".join(s.removeprefix("collision.") for s in structures)
-        + " | collision total | contact springs | intersection check | integrator | states | total MiB |",
-        "|---|---:|" + "---:|" * (len(structures) + 6),
+        + " | collision total | contact springs | impulses | intersection check | integrator | states | total MiB |",
+        "|---|---:|" + "---:|" * (len(structures) + 7),
     ]
     for r in rows:
         memory = r["device_bytes"]
@@ -725,7 +712,8 @@ def report_breakdown(results: dict[str, Any], plot: str | None) -> list[str]:
         cells = " | ".join(f"{memory.get(s, 0) / per:.0f}" for s in structures)
         total = sum(v for k, v in memory.items() if k != "collision.total")
         lines.append(f"| {r['scene']} | {r['triangles']:,} | {cells} | **{memory['collision.total'] / per:.0f}** | "
-                     f"{memory['contact_springs'] / per:.0f} | {memory['intersection_check'] / per:.0f} | "
+                     f"{memory['contact_springs'] / per:.0f} | {memory.get('impulses', 0) / per:.0f} | "
+                     f"{memory['intersection_check'] / per:.0f} | "
                      f"{memory['integrator'] / per:.0f} | {memory['states'] / per:.0f} | {total / 2**20:.1f} |")
     lines += ["", f"Runtime of this section: {results['seconds']:.0f} s.", ""]
     return lines

@@ -37,6 +37,7 @@ from pscc.errors import InputError, PsccError
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones, ImpulseResponse
 from pscc.sim.integrator import ImplicitEuler
+from pscc.sim.memory import warp_array_bytes
 from pscc.sim.model import VERTEX_FREE, ClothModel
 from pscc.sim.obstacles import step_map
 from pscc.sim.proximity import ProximityContacts
@@ -193,11 +194,26 @@ class ClothSolver:
         return vertices.astype(np.float32), faces.astype(np.int32)
 
     def device_bytes(self) -> dict[str, int]:
-        """Device memory of the collision structures and the contact springs, in bytes."""
+        """Device memory per structure, in bytes, and their ``total``.
+
+        ``collision`` (the detector's own accounting: BVH, front, hash tables, pair buffers),
+        ``contact_springs``, ``impulses`` (penetration-handling buffers), ``intersection_check``,
+        ``integrator`` (block-sparse system, PCG vectors and the model's arrays). States are owned by
+        the caller and not counted.
+        """
         collision = self.detector.device_bytes() if self.detector.topology is not None else {"total": 0}
         springs = self.proximity.springs
         contact = springs.vertices.capacity + springs.weights.capacity + springs.normals.capacity
-        return {"collision": int(collision["total"]), "contact_springs": int(contact)}
+        seen: set[int] = {id(springs.vertices), id(springs.weights), id(springs.normals)}
+        parts = {
+            "collision": int(collision["total"]),
+            "contact_springs": int(contact),
+            "impulses": warp_array_bytes(self.impulses, seen=seen),
+            "intersection_check": warp_array_bytes(self.intersection_check, seen=seen),
+            "integrator": warp_array_bytes(self.integrator, seen=seen) + warp_array_bytes(self.model, seen=seen),
+        }
+        parts["total"] = sum(parts.values())
+        return parts
 
     def state_dict(self, state: ClothState) -> dict[str, np.ndarray]:
         """Everything a later step depends on, as host arrays (for checkpoints).

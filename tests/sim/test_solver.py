@@ -151,6 +151,19 @@ def test_contact_buffers_grow_under_heavy_contact() -> None:
         most = max(most, stats["counts"]["contacts"])
     assert most > first_capacity
     assert solver.proximity.springs.capacity >= most
+    memory = solver.device_bytes()
+    assert memory["contact_springs"] >= most * 4 * 4  # at least the four vertex ids of each spring
+    assert memory["total"] == sum(v for k, v in memory.items() if k != "total")
+
+
+def test_device_bytes_counts_every_structure_and_grows_with_the_mesh() -> None:
+    small, large = (ClothSolver(build_scene("drape", n), device="cpu").device_bytes() for n in (400, 1600))
+    for memory in (small, large):
+        assert set(memory) == {"collision", "contact_springs", "impulses", "intersection_check", "integrator", "total"}
+        assert all(v > 0 for v in memory.values())
+        assert memory["total"] == sum(v for k, v in memory.items() if k != "total")
+    for key in ("collision", "intersection_check", "integrator"):
+        assert large[key] > 2 * small[key], key
 
 
 def test_per_object_materials_and_wind() -> None:
