@@ -20,9 +20,17 @@ triplet range                         writer       blocks
 [.. , .. + 16 contact_capacity)       contact      (a, b) for a, b in the contact's 4 vertices
 ====================================  ===========  =============================================
 
+The element blocks (vertex, face and hinge ranges) have a sparsity pattern fixed by the mesh: the BSR
+matrix is allocated once with every (a, b) pair of a face or hinge and every diagonal block, and each
+step zeroes its values and adds every element triplet into its block (a binary search in the row),
+which costs far less than rebuilding the matrix from triplets (sort, unique, prefix sums) every step.
+Contact blocks change their pattern every step: they stay as triplets and are applied matrix-free,
+``A x = A_elements x + sum_contacts A_c x`` (:meth:`ImplicitSystem.apply`), with their diagonal blocks
+added to the preconditioner's diagonal (:meth:`ImplicitSystem.diagonal`).
+
 Dirichlet rows (scripted and massless vertices): the row and column of vertex i are replaced by
 ``s_i I`` (s_i its mass, or 1) with ``b_i = s_i dv_i`` for the prescribed ``dv_i``. Element blocks
-touching such a vertex are written as zero blocks (dropped by the BSR build), and free rows move the
+touching such a vertex are written as zero blocks, and free rows move the
 known part to the right-hand side: ``b_k -= A_kj v_ref_j`` with ``v_ref_j`` the prescribed new
 velocity of j, which is the same as ``-A_kj (v_j + dv_j)``. Free vertices use ``v_ref = v_t``.
 
@@ -32,8 +40,9 @@ Force accumulation into ``b`` uses float atomics: bitwise reproducible on the CP
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
-from warp.sparse import bsr_set_from_triplets, bsr_zeros
+from warp.sparse import bsr_get_diag, bsr_mv, bsr_set_from_triplets, bsr_zeros
 
 from pscc.sim.contact_springs import ContactSprings
 from pscc.sim.materials import (
@@ -311,14 +320,92 @@ def _assemble_contacts(
             _emit_block(triplets, base + 4 * a + b, ids[a], ids[b], block, vertices.kind, v_ref, rhs)
 
 
+@wp.func
+def _block_index(offsets: wp.array(dtype=wp.int32), columns: wp.array(dtype=wp.int32), row: int, col: int) -> int:
+    """Position of block (row, col) in a BSR matrix with sorted columns per row; -1 when absent."""
+    lo = offsets[row]
+    end = offsets[row + 1]
+    hi = end
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if columns[mid] < col:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < end:
+        if columns[lo] == col:
+            return lo
+    return -1
+
+
+@wp.kernel
+def _add_element_blocks(
+    # in:
+    triplets: Triplets,
+    offsets: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    # out:
+    values: wp.array(dtype=wp.mat33),
+    missing: wp.array(dtype=wp.int32),
+):
+    """One thread per element triplet: add its block into the fixed-pattern BSR values."""
+    s = wp.tid()
+    index = _block_index(offsets, columns, triplets.rows[s], triplets.cols[s])
+    if index >= 0:
+        wp.atomic_add(values, index, triplets.values[s])
+    else:
+        wp.atomic_add(missing, 0, 1)
+
+
+@wp.kernel
+def _add_contact_products(
+    # in:
+    triplets: Triplets,
+    offset: int,
+    count: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3),
+    # out:
+    y: wp.array(dtype=wp.vec3),
+):
+    """One thread per contact triplet: ``y_row += block x_col`` (slots past the contact count skipped)."""
+    k = wp.tid()
+    if k // 16 >= count[0]:
+        return
+    s = offset + k
+    wp.atomic_add(y, triplets.rows[s], triplets.values[s] * x[triplets.cols[s]])
+
+
+@wp.kernel
+def _add_contact_diagonal(
+    # in:
+    triplets: Triplets,
+    offset: int,
+    count: wp.array(dtype=wp.int32),
+    # out:
+    diagonal: wp.array(dtype=wp.mat33),
+):
+    """One thread per contact triplet: add its diagonal blocks to ``diagonal``."""
+    k = wp.tid()
+    if k // 16 >= count[0]:
+        return
+    s = offset + k
+    row = triplets.rows[s]
+    if row == triplets.cols[s]:
+        wp.atomic_add(diagonal, row, triplets.values[s])
+
+
 class ImplicitSystem:
-    """Owns the triplet buffers, the BSR matrix A and the right-hand side b of one implicit step.
+    """Owns the triplet buffers, the element matrix, the contact blocks and the right-hand side of one step.
+
+    The system matrix is ``A = matrix + contact blocks``: apply it with :meth:`apply`, get its diagonal
+    blocks with :meth:`diagonal` and the whole of it on the host with :meth:`dense`.
 
     Args:
         model: The cloth.
 
     Attributes:
-        matrix: (n x n blocks of 3x3) BSR matrix A [kg], rebuilt by every :meth:`assemble`.
+        matrix: (n x n blocks of 3x3) BSR matrix of the element blocks (mass, faces, hinges) [kg], with
+            the fixed pattern of the mesh; its values are refilled by every :meth:`assemble`.
         rhs: (n,) vec3 right-hand side b [kg m/s].
         reference_velocities: (n,) vec3 ``v_ref``: v_t for free vertices, the prescribed new velocity
             for Dirichlet vertices [m/s].
@@ -332,9 +419,13 @@ class ImplicitSystem:
         self._hinge_offset = n + 9 * model.face_count
         self._contact_offset = self._hinge_offset + 16 * model.hinge_count
         self._contact_capacity = 0
+        self._contact_count: wp.array | None = None
+        self._contact_slots = 0
         self.triplets = Triplets()
         self._allocate_triplets(self._contact_offset)
         self.matrix = bsr_zeros(n, n, wp.mat33, device=self.device)
+        self._build_pattern()
+        self._missing = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.rhs = wp.zeros(n, dtype=wp.vec3, device=self.device)
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
 
@@ -351,7 +442,8 @@ class ImplicitSystem:
 
     def assemble(self, positions: wp.array, velocities: wp.array, targets: wp.array, params: StepParams,
                  contacts: ContactSprings | None, dv: wp.array, *, warm_start: bool = False) -> None:
-        """Fill :attr:`matrix` and :attr:`rhs` for the state (x_t, v_t); write the initial guess into ``dv``.
+        """Fill :attr:`matrix`, the contact blocks and :attr:`rhs` for the state (x_t, v_t); write the
+        initial guess into ``dv``.
 
         Args:
             positions: (n,) vec3 x_t [m].
@@ -363,8 +455,7 @@ class ImplicitSystem:
                 free vertices 0 or, with ``warm_start``, the value ``dv`` already holds (the last step's).
             warm_start: Keep ``dv`` of free vertices as the initial guess.
 
-        Allocates: yes (``warp.sparse`` temporaries; triplets grow with the contact capacity).
-        Capture-safe: no.
+        Allocates: only when the contact capacity grows. Capture-safe: no.
         """
         model = self.model
         n = model.vertex_count
@@ -383,7 +474,8 @@ class ImplicitSystem:
                       inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params,
                               self._hinge_offset],
                       outputs=[self.triplets, self.rhs])
-        if contacts is not None:
+        self._contact_count, self._contact_slots = None, 0
+        if contacts is not None and contact_capacity > 0:
             view = ContactArrays()
             view.vertices = contacts.vertices
             view.weights = contacts.weights
@@ -394,9 +486,73 @@ class ImplicitSystem:
                       inputs=[view, model.vertices, positions, self.reference_velocities, params,
                               self._contact_offset],
                       outputs=[self.triplets, self.rhs])
-        used = self._contact_offset + 16 * contact_capacity
-        bsr_set_from_triplets(self.matrix, self.triplets.rows[:used], self.triplets.cols[:used],
-                              self.triplets.values[:used], prune_numerical_zeros=True)
+            self._contact_count, self._contact_slots = contacts.count, 16 * contact_capacity
+        self.matrix.values.zero_()
+        wp.launch(_add_element_blocks, dim=self._contact_offset, device=self.device,
+                  inputs=[self.triplets, self.matrix.offsets, self.matrix.columns],
+                  outputs=[self.matrix.values, self._missing])
+
+    def apply(self, x: wp.array, y: wp.array) -> None:
+        """``y = A x`` with the last assembled system (element matrix plus contact blocks).
+
+        Allocates: no. Capture-safe: yes.
+        """
+        bsr_mv(self.matrix, x, y, alpha=1.0, beta=0.0)
+        if self._contact_slots:
+            wp.launch(_add_contact_products, dim=self._contact_slots, device=self.device,
+                      inputs=[self.triplets, self._contact_offset, self._contact_count, x], outputs=[y])
+
+    def diagonal(self, out: wp.array) -> None:
+        """Write the (n,) mat33 diagonal blocks of A into ``out``. Allocates: no. Capture-safe: yes."""
+        bsr_get_diag(self.matrix, out=out)
+        if self._contact_slots:
+            wp.launch(_add_contact_diagonal, dim=self._contact_slots, device=self.device,
+                      inputs=[self.triplets, self._contact_offset, self._contact_count], outputs=[out])
+
+    def dense(self) -> np.ndarray:
+        """The whole system matrix A on the host, (3n, 3n) float64 (for tests and debugging)."""
+        n = self.model.vertex_count
+        matrix = self.matrix
+        nnz = matrix.nnz_sync()
+        offsets = matrix.offsets.numpy()
+        rows = np.repeat(np.arange(n), np.diff(offsets[: n + 1]))
+        blocks = [(rows, matrix.columns.numpy()[:nnz], matrix.values.numpy()[:nnz])]
+        if self._contact_slots:
+            used = 16 * min(int(self._contact_count.numpy()[0]), self._contact_slots // 16)
+            window = slice(self._contact_offset, self._contact_offset + used)
+            blocks.append((self.triplets.rows.numpy()[window], self.triplets.cols.numpy()[window],
+                           self.triplets.values.numpy()[window]))
+        dense = np.zeros((n, 3, n, 3))
+        for block_rows, block_cols, values in blocks:
+            np.add.at(dense, (block_rows, slice(None), block_cols), values.astype(np.float64))
+        return dense.reshape(3 * n, 3 * n)
+
+    def missing_blocks(self) -> int:
+        """Element triplets that found no block of the fixed pattern since the start (always 0 unless a
+        kernel writes outside its element; a sync point)."""
+        return int(self._missing.numpy()[0])
+
+    def _build_pattern(self) -> None:
+        """Allocate :attr:`matrix` with every diagonal block and every (a, b) pair of a face or hinge."""
+        n = self.model.vertex_count
+        pairs = [np.stack([np.arange(n), np.arange(n)], axis=1)]
+        for elements in (self.model.faces.indices, self.model.hinges.indices):
+            if elements is None or elements.shape[0] == 0:
+                continue
+            ids = elements.numpy().astype(np.int64)
+            k = ids.shape[1]
+            pairs.append(np.stack([np.repeat(ids, k, axis=1).ravel(), np.tile(ids, (1, k)).ravel()], axis=1))
+        keys = np.unique(np.concatenate(pairs)[:, 0] * n + np.concatenate(pairs)[:, 1])
+        rows = wp.array((keys // n).astype(np.int32), dtype=wp.int32, device=self.device)
+        cols = wp.array((keys % n).astype(np.int32), dtype=wp.int32, device=self.device)
+        ones = wp.array(np.tile(np.eye(3, dtype=np.float32), (keys.size, 1, 1)), dtype=wp.mat33, device=self.device)
+        bsr_set_from_triplets(self.matrix, rows, cols, ones, prune_numerical_zeros=False)
+        nnz = self.matrix.nnz_sync()
+        offsets = self.matrix.offsets.numpy()
+        columns = self.matrix.columns.numpy()[:nnz]
+        built = np.repeat(np.arange(n, dtype=np.int64), np.diff(offsets[: n + 1])) * n + columns
+        if nnz != keys.size or not np.array_equal(built, keys):
+            raise RuntimeError("the BSR build did not keep the element pattern sorted by (row, column)")
 
     def _allocate_triplets(self, size: int) -> None:
         size = max(1, size)

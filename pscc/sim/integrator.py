@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 import warp as wp
-from warp.sparse import bsr_get_diag
 
 from pscc._checks import as_numpy
 from pscc.errors import InputError
@@ -235,7 +234,7 @@ class ImplicitEuler:
         self._energies = wp.zeros(4, dtype=wp.float64, device=self.device)
         precondition = self._precondition if self.config.preconditioner != "none" else None
         self._solver = PreconditionedConjugateGradient(
-            self.system.matrix, self.system.rhs, self.dv, self.config.cg_tolerance, self.config.cg_max_iterations,
+            self.system.apply, self.system.rhs, self.dv, self.config.cg_tolerance, self.config.cg_max_iterations,
             self.config.cg_check_every, precondition)
 
     def step(self, state_in: ClothState, state_out: ClothState, dt: float, contacts: ContactSprings | None = None,
@@ -259,7 +258,7 @@ class ImplicitEuler:
             InputError: a state of the wrong size or device, a bad ``dt``, contacts on another device
                 or handle targets of the wrong shape.
 
-        Allocates: yes (sparse-matrix temporaries; buffers grow with the contact capacity).
+        Allocates: only when the contact capacity grows.
         Capture-safe: no (CG convergence checks read the residual on the host).
         """
         started = time.perf_counter()
@@ -279,7 +278,7 @@ class ImplicitEuler:
         self.system.assemble(state_in.positions, state_in.velocities, self.targets, params, contacts, self.dv,
                              warm_start=self.config.cg_warm_start)
         if self.config.preconditioner != "none":
-            bsr_get_diag(self.system.matrix, out=self._diagonal)
+            self.system.diagonal(self._diagonal)
             wp.launch(_invert_diagonal_blocks, dim=self.model.vertex_count, device=self.device,
                       inputs=[self._diagonal, _PRECONDITIONER_MODE[self.config.preconditioner]],
                       outputs=[self._inverse_diagonal])

@@ -76,10 +76,11 @@ def _shift_scalars(scalars: wp.array(dtype=float)):
 
 
 class PreconditionedConjugateGradient:
-    """Solves ``A x = b`` for a symmetric positive (semi-)definite BSR matrix of 3x3 blocks.
+    """Solves ``A x = b`` for a symmetric positive (semi-)definite operator on (n,) vec3 arrays.
 
     Args:
-        matrix: the (n x n blocks) matrix; its values may change between calls, not its size.
+        matrix: the operator: a BSR matrix of (n x n) 3x3 blocks (its values may change between calls, not
+            its size), or a callable ``f(x, y)`` writing ``y = A x``.
         rhs: (n,) vec3 right-hand side (read at every call).
         x: (n,) vec3 solution, used as the initial guess (warm start) and overwritten.
         tolerance: stop when ``|b - A x| <= tolerance * |b|``.
@@ -88,9 +89,11 @@ class PreconditionedConjugateGradient:
         precondition: ``f(r, z)`` writing ``z = M^-1 r``; ``None`` for no preconditioner.
     """
 
-    def __init__(self, matrix: BsrMatrix, rhs: wp.array, x: wp.array, tolerance: float, max_iterations: int,
+    def __init__(self, matrix: BsrMatrix | Callable[[wp.array, wp.array], None], rhs: wp.array, x: wp.array,
+                 tolerance: float, max_iterations: int,
                  check_every: int, precondition: Callable[[wp.array, wp.array], None] | None = None) -> None:
         self.matrix = matrix
+        self._apply = matrix if callable(matrix) and not isinstance(matrix, BsrMatrix) else self._bsr_apply
         self.rhs = rhs
         self.x = x
         self.tolerance = float(tolerance)
@@ -107,6 +110,9 @@ class PreconditionedConjugateGradient:
         self.scalars = wp.zeros(4, dtype=float, device=device)
         self._bb = wp.zeros(1, dtype=float, device=device)
 
+    def _bsr_apply(self, x: wp.array, y: wp.array) -> None:
+        bsr_mv(self.matrix, x, y, alpha=1.0, beta=0.0)
+
     def _dot(self, a: wp.array, b: wp.array, slot: int) -> None:
         wp.utils.array_inner(a, b, out=self.scalars[slot : slot + 1])
 
@@ -122,7 +128,7 @@ class PreconditionedConjugateGradient:
         n = self.rhs.shape[0]
         dev = self.device
         wp.utils.array_inner(self.rhs, self.rhs, out=self._bb)
-        bsr_mv(self.matrix, self.x, self.r, alpha=1.0, beta=0.0)
+        self._apply(self.x, self.r)
         wp.launch(_initial_residual, dim=n, inputs=[self.rhs], outputs=[self.r], device=dev)
         absolute = self.tolerance * float(self._bb.numpy()[0]) ** 0.5
         self._dot(self.r, self.r, _RR)
@@ -135,7 +141,7 @@ class PreconditionedConjugateGradient:
         self._dot(self.r, self.z, _RZ)
         iterations = 0
         while iterations < self.max_iterations:
-            bsr_mv(self.matrix, self.p, self.ap, alpha=1.0, beta=0.0)
+            self._apply(self.p, self.ap)
             self._dot(self.p, self.ap, _PAP)
             wp.launch(_step_solution, dim=n, inputs=[self.scalars, self.p, self.ap], outputs=[self.x, self.r],
                       device=dev)

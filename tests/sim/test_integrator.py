@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 
 from pscc.mesh.generate import grid_sheet
 from pscc.sim import ClothMaterial, ClothModel, ClothState, ContactSprings, ImplicitEuler, SolverConfig
@@ -24,18 +25,7 @@ def edge_ratios(x: np.ndarray, x_rest: np.ndarray, edges: np.ndarray) -> np.ndar
 
 
 def dense_matrix(integrator: ImplicitEuler) -> np.ndarray:
-    matrix = integrator.system.matrix
-    nnz = matrix.nnz_sync()
-    offsets = matrix.offsets.numpy()
-    columns = matrix.columns.numpy()[:nnz]
-    values = matrix.values.numpy()[:nnz].astype(np.float64)
-    n = matrix.nrow
-    dense = np.zeros((3 * n, 3 * n))
-    for row in range(n):
-        for k in range(offsets[row], offsets[row + 1]):
-            col = columns[k]
-            dense[3 * row:3 * row + 3, 3 * col:3 * col + 3] += values[k]
-    return dense
+    return integrator.system.dense()
 
 
 def simulate(integrator: ImplicitEuler, state: ClothState, steps: int, dt: float = DT, **kwargs):
@@ -264,6 +254,25 @@ def test_assembled_matrix_is_symmetric_positive_definite_and_cg_converges(device
         assert np.count_nonzero(a[rows]) == 3 and np.count_nonzero(a[:, rows]) == 3
     # Contacts couple vertices that share no face (5 and 14 do not; 1 and 9 do not).
     assert np.abs(a[15:18, 42:45]).max() > 0.0 and np.abs(a[3:6, 27:30]).max() > 0.0
+    # The fixed-pattern matrix plus the matrix-free contact blocks equal the sum of every triplet.
+    system = integrator.system
+    used = system._contact_offset + 16 * 2
+    reference = np.zeros((16, 3, 16, 3))
+    np.add.at(reference, (system.triplets.rows.numpy()[:used], slice(None), system.triplets.cols.numpy()[:used]),
+              system.triplets.values.numpy()[:used].astype(np.float64))
+    np.testing.assert_allclose(a, reference.reshape(48, 48), rtol=1e-6, atol=1e-6 * scale)
+    assert system.missing_blocks() == 0
+    # apply() and diagonal() agree with the dense matrix.
+    x = rng.normal(size=(16, 3)).astype(np.float32)
+    y = wp.zeros(16, dtype=wp.vec3, device=device)
+    system.apply(wp.array(x, dtype=wp.vec3, device=device), y)
+    np.testing.assert_allclose(y.numpy().reshape(-1), a @ x.reshape(-1).astype(np.float64), rtol=1e-5,
+                               atol=1e-5 * scale)
+    diagonal = wp.zeros(16, dtype=wp.mat33, device=device)
+    system.diagonal(diagonal)
+    for vertex in range(16):
+        rows = slice(3 * vertex, 3 * vertex + 3)
+        np.testing.assert_allclose(diagonal.numpy()[vertex], a[rows, rows], rtol=1e-6, atol=1e-6 * scale)
     # CG converged: the true residual is below the tolerance.
     assert stats.cg_converged and stats.cg_iterations > 1
     relative = np.linalg.norm(b - a @ dv) / np.linalg.norm(b)
