@@ -254,12 +254,20 @@ def test_assembled_matrix_is_symmetric_positive_definite_and_cg_converges(device
         assert np.count_nonzero(a[rows]) == 3 and np.count_nonzero(a[:, rows]) == 3
     # Contacts couple vertices that share no face (5 and 14 do not; 1 and 9 do not).
     assert np.abs(a[15:18, 42:45]).max() > 0.0 and np.abs(a[3:6, 27:30]).max() > 0.0
-    # The fixed-pattern matrix plus the matrix-free contact blocks equal the sum of every triplet.
+    # The fixed-pattern matrix equals the sum of every element triplet, and the contacts add w_a w_b K.
     system = integrator.system
-    used = system._contact_offset + 16 * 2
+    used = system._element_slots
     reference = np.zeros((16, 3, 16, 3))
     np.add.at(reference, (system.triplets.rows.numpy()[:used], slice(None), system.triplets.cols.numpy()[:used]),
               system.triplets.values.numpy()[:used].astype(np.float64))
+    blocks = system.contact_blocks.numpy().astype(np.float64)
+    weights = springs.weights.numpy().astype(np.float64)
+    for c, ids in enumerate(springs.vertices.numpy()[:2]):
+        assert np.abs(blocks[c]).max() > 0.0
+        for i in range(4):
+            for j in range(4):
+                if ids[i] not in (0, 15) and ids[j] not in (0, 15):
+                    reference[ids[i], :, ids[j], :] += weights[c, i] * weights[c, j] * blocks[c]
     np.testing.assert_allclose(a, reference.reshape(48, 48), rtol=1e-6, atol=1e-6 * scale)
     assert system.missing_blocks() == 0
     # apply() and diagonal() agree with the dense matrix.
