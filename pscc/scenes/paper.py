@@ -172,10 +172,10 @@ TWISTING_START: float = 1.0
 TWISTING_RAMP: float = 0.5
 """Time [s] the ``twisting`` ball takes to reach its final angular speed."""
 
-TWISTING_FRICTION: float = 0.5
+TWISTING_FRICTION: float = 0.9
 """Friction coefficient of the ``twisting`` cloths (the default is 0.3)."""
 
-TWISTING_CORNER_SHIFT: tuple[float, float] = (0.182, -0.47)
+TWISTING_CORNER_SHIFT: tuple[float, float] = (0.217, -0.33)
 """Inward (along x and y each) and vertical travel [m] of the ``twisting`` corners while draping."""
 
 
@@ -197,15 +197,16 @@ def twisting(scale: float) -> Scene:
 
     * cloths: three 1 m x 1 m horizontal sheets stacked 1 cm apart, the lowest 1 cm above the top of
       the ball (z = 0.31, 0.32, 0.33), centred on the ball's axis;
-    * corners: the corner vertex of each sheet is held and moved (eased, 0 -> 1 s) 0.18 m inwards
-      along x and y and 0.47 m down, to 0.45 m from the axis: the layers drape over the ball with 3 %
-      slack along their diagonals (the path over the ball never exceeds the half diagonal on the way),
-      then the corners stay (point pins: the cloth can pivot about them);
+    * corners: the corner vertex of each sheet is held and moved (eased, 0 -> 1 s) 0.22 m inwards
+      along x and y and 0.33 m down, to 0.40 m from the axis at the height of the ball's centre
+      (z = -0.02 .. 0): the layers hang loosely over the ball (the path over the ball along a diagonal
+      is 19 % shorter than the half diagonal), then the corners stay (point pins: the cloth can pivot
+      about them);
     * ball: radius 0.3 m, centre at the origin, spinning about the vertical axis: the angular speed
       rises smoothly from 0 at 1.0 s to half a turn per second at 1.5 s and stays there;
-    * friction 0.5 (the default is 0.3): friction alone drags the layers round the spinning ball
-      against their held corners, so they twist (by about 12 degrees at 5K triangles) and the ball
-      slips under them, with the three layers sheared against each other all the time;
+    * friction 0.9 (the default is 0.3; cloth on rubber): friction alone drags the layers round the
+      spinning ball against their held corners, so they twist (by about 20 degrees at 5K triangles)
+      and the ball slips under them, with the three layers sheared against each other all the time;
     * time: dt = 1/200 s (the paper's), 25 frames/s, 8 steps per frame.
     """
     scale = check_scale("twisting", scale)
