@@ -460,6 +460,7 @@ class ImplicitSystem:
         self._hinge_offset = n + 9 * model.face_count
         self._element_slots = self._hinge_offset + 16 * model.hinge_count
         self._contacts: ContactArrays | None = None
+        self._product_launches: dict[tuple[int, int], list] = {}
         self.triplets = Triplets()
         size = max(1, self._element_slots)
         self.triplets.rows = wp.zeros(size, dtype=wp.int32, device=self.device)
@@ -516,6 +517,7 @@ class ImplicitSystem:
                               self._hinge_offset],
                       outputs=[self.triplets, self.rhs])
         self._contacts = None
+        self._product_launches = {}
         if contacts is not None and contacts.capacity > 0:
             self.reserve_contacts(contacts.capacity)
             view = ContactArrays()
@@ -538,12 +540,22 @@ class ImplicitSystem:
 
         Allocates: no. Capture-safe: yes.
         """
-        matrix = self.matrix
-        wp.launch(_element_matrix_times, dim=self.model.vertex_count, device=self.device,
-                  inputs=[matrix.offsets, matrix.columns, matrix.values, x], outputs=[y])
-        if self._contacts is not None:
-            wp.launch(_add_contact_products, dim=self._contacts.vertices.shape[0], device=self.device,
-                      inputs=[self._contacts, self.model.vertices.kind, self.contact_blocks, x], outputs=[y])
+        key = (x.ptr, y.ptr)
+        commands = self._product_launches.get(key)
+        if commands is None:
+            # Packed once per (x, y) pair and step: CG calls this with the same arrays every iteration.
+            matrix = self.matrix
+            commands = [wp.launch(_element_matrix_times, dim=self.model.vertex_count, device=self.device,
+                                  inputs=[matrix.offsets, matrix.columns, matrix.values, x], outputs=[y],
+                                  record_cmd=True)]
+            if self._contacts is not None:
+                commands.append(wp.launch(_add_contact_products, dim=self._contacts.vertices.shape[0],
+                                          device=self.device, inputs=[self._contacts, self.model.vertices.kind,
+                                                                      self.contact_blocks, x],
+                                          outputs=[y], record_cmd=True))
+            self._product_launches[key] = commands
+        for command in commands:
+            command.launch()
 
     def diagonal(self, out: wp.array) -> None:
         """Write the (n,) mat33 diagonal blocks of A into ``out``. Allocates: no. Capture-safe: yes."""

@@ -232,6 +232,7 @@ class ImplicitEuler:
         self._diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
         self._inverse_diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
         self._energies = wp.zeros(4, dtype=wp.float64, device=self.device)
+        self._precondition_launches: dict[tuple[int, int], Any] = {}
         precondition = self._precondition if self.config.preconditioner != "none" else None
         self._solver = PreconditionedConjugateGradient(
             self.system.apply, self.system.rhs, self.dv, self.config.cg_tolerance, self.config.cg_max_iterations,
@@ -363,9 +364,14 @@ class ImplicitEuler:
         return params
 
     def _precondition(self, r: wp.array, z: wp.array) -> None:
-        """z = P^-1 r with the inverted diagonal blocks (or scalar diagonal)."""
-        wp.launch(_apply_block_diagonal, dim=self.model.vertex_count, device=self.device,
-                  inputs=[self._inverse_diagonal, r, r, 1.0, 0.0], outputs=[z])
+        """z = P^-1 r with the inverted diagonal blocks (or scalar diagonal); launches packed once per pair."""
+        key = (r.ptr, z.ptr)
+        command = self._precondition_launches.get(key)
+        if command is None:
+            command = wp.launch(_apply_block_diagonal, dim=self.model.vertex_count, device=self.device,
+                                inputs=[self._inverse_diagonal, r, r, 1.0, 0.0], outputs=[z], record_cmd=True)
+            self._precondition_launches[key] = command
+        command.launch()
 
     def _check_state(self, state: ClothState, name: str) -> None:
         if not isinstance(state, ClothState):

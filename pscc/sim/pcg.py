@@ -109,6 +109,13 @@ class PreconditionedConjugateGradient:
         self.ap = wp.zeros(n, dtype=wp.vec3, device=device)
         self.scalars = wp.zeros(4, dtype=float, device=device)
         self._bb = wp.zeros(1, dtype=float, device=device)
+        # The loop's launches, packed once (Python argument packing costs as much as a small kernel).
+        self._step_solution = wp.launch(_step_solution, dim=n, inputs=[self.scalars, self.p, self.ap],
+                                        outputs=[self.x, self.r], device=device, record_cmd=True)
+        self._step_direction = wp.launch(_step_direction, dim=n, inputs=[self.z, self.scalars], outputs=[self.p],
+                                         device=device, record_cmd=True)
+        self._shift_scalars = wp.launch(_shift_scalars, dim=1, inputs=[self.scalars], device=device,
+                                        record_cmd=True)
 
     def _bsr_apply(self, x: wp.array, y: wp.array) -> None:
         bsr_mv(self.matrix, x, y, alpha=1.0, beta=0.0)
@@ -143,13 +150,12 @@ class PreconditionedConjugateGradient:
         while iterations < self.max_iterations:
             self._apply(self.p, self.ap)
             self._dot(self.p, self.ap, _PAP)
-            wp.launch(_step_solution, dim=n, inputs=[self.scalars, self.p, self.ap], outputs=[self.x, self.r],
-                      device=dev)
+            self._step_solution.launch()
             if self.precondition is not None:
                 self.precondition(self.r, self.z)
             self._dot(self.r, self.z, _RZ_NEW)
-            wp.launch(_step_direction, dim=n, inputs=[self.z, self.scalars], outputs=[self.p], device=dev)
-            wp.launch(_shift_scalars, dim=1, inputs=[self.scalars], device=dev)
+            self._step_direction.launch()
+            self._shift_scalars.launch()
             iterations += 1
             if iterations % self.check_every == 0 or iterations == self.max_iterations:
                 self._dot(self.r, self.r, _RR)
