@@ -109,6 +109,7 @@ class PreconditionedConjugateGradient:
         self.ap = wp.zeros(n, dtype=wp.vec3, device=device)
         self.scalars = wp.zeros(4, dtype=float, device=device)
         self._bb = wp.zeros(1, dtype=float, device=device)
+        self._scalar_views = [self.scalars[k : k + 1] for k in range(4)]  # slicing costs Python time per call
         # The loop's launches, packed once (Python argument packing costs as much as a small kernel).
         self._step_solution = wp.launch(_step_solution, dim=n, inputs=[self.scalars, self.p, self.ap],
                                         outputs=[self.x, self.r], device=device, record_cmd=True)
@@ -121,7 +122,7 @@ class PreconditionedConjugateGradient:
         bsr_mv(self.matrix, x, y, alpha=1.0, beta=0.0)
 
     def _dot(self, a: wp.array, b: wp.array, slot: int) -> None:
-        wp.utils.array_inner(a, b, out=self.scalars[slot : slot + 1])
+        wp.utils.array_inner(a, b, out=self._scalar_views[slot])
 
     def __call__(self) -> tuple[int, float, float]:
         """Run PCG from the current ``x``.
