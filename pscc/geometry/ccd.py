@@ -11,6 +11,12 @@ with every point taken at time t. The pair comes within distance ``d_min`` at ti
 |F(t, u, v)| <= d_min for some admissible (u, v). F is linear in each parameter separately, so over
 a box of parameters its values lie in the bounding box of its 8 corner values.
 
+**Motion-bound filter.** Before any search, a pair is excluded when its distance at t0, bounded
+from below with the distance functions' documented float32 error, exceeds ``d_min`` plus the largest
+motion of F over the step (|F(t)| >= |F(0)| - max |F(1) - F(0)|, the maximum taken at the corners of
+the (u, v) domain). Resting and slowly moving pairs, the grazing queries that cost the search the most
+boxes, end here.
+
 **Search.** A depth-first search over (t, u, v) boxes with a fixed per-thread stack. A box is
 *excluded* when the bounding box of its corner values, grown by the rounding bound ``err``, stays
 farther than ``d_min`` from the origin (Euclidean). Boxes are split along the parameter whose
@@ -39,6 +45,8 @@ import warp as wp
 
 from pscc import tolerances
 from pscc._checks import check_nonnegative, check_points
+from pscc.geometry import distance_tolerances
+from pscc.geometry.distance import edge_edge_distance_squared, vertex_face_distance_squared
 
 wp.set_module_options({"enable_backward": False})
 
@@ -456,6 +464,48 @@ def _query_error(scale_axes: wp.vec3, extra_error: float, params: CcdParameters)
     return params.rounding_factor * scale_axes + wp.vec3(extra_error, extra_error, extra_error)
 
 
+_DISTANCE_RELATIVE_ERROR = wp.constant(distance_tolerances.ILL_CONDITIONED_REL_ERROR
+                                       + distance_tolerances.DISTANCE_ERROR_CONST * distance_tolerances.EPS32)
+_MOTION_MARGIN = wp.constant(1.0e-5)
+
+
+@wp.func
+def _motion_cannot_reach(
+    distance_squared_t0: float,
+    q0: wp.vec3,
+    e10: wp.vec3,
+    e20: wp.vec3,
+    q1: wp.vec3,
+    e11: wp.vec3,
+    e21: wp.vec3,
+    triangle_domain: int,
+    err: wp.vec3,
+    scale: float,
+    minimum_distance: float,
+) -> bool:
+    """Motion-bound exclusion: True when the pair provably stays farther than ``minimum_distance``.
+
+    With F(t, u, v) = F0(u, v) + t dF(u, v), |F| >= dist_t0 - max |dF| for t in [0, 1], and |dF| is
+    convex and linear in (u, v), so its maximum over the domain is at a corner. ``dist_t0`` is bounded
+    from below by the float32 distance minus the distance functions' documented error
+    (``ILL_CONDITIONED_REL_ERROR + 16 EPS32`` times the local scale) and the rounding bound of F;
+    |dF| is bounded from above by its corner values plus twice that rounding bound, with a relative
+    margin. A resting or slowly moving pair whose gap exceeds its motion is thus excluded without the
+    box search (the costly case of grazing contacts); any pair that could come within
+    ``minimum_distance`` is left to the search.
+    """
+    slack = wp.length(err)
+    lower = wp.sqrt(wp.max(distance_squared_t0, 0.0)) - _DISTANCE_RELATIVE_ERROR * scale - 2.0 * slack
+    motion00 = q1 - q0
+    motion10 = motion00 + (e11 - e10)
+    motion01 = motion00 + (e21 - e20)
+    motion = wp.max(wp.length(motion00), wp.max(wp.length(motion10), wp.length(motion01)))
+    if triangle_domain == 0:
+        motion = wp.max(motion, wp.length(motion10 + (e21 - e20)))
+    reach = (motion + 2.0 * slack) * (1.0 + _MOTION_MARGIN)
+    return lower - reach > minimum_distance * (1.0 + _MOTION_MARGIN)
+
+
 @wp.func
 def _ccd_from_differences(
     q0: wp.vec3,
@@ -468,14 +518,20 @@ def _ccd_from_differences(
     magnitude: wp.vec3,
     extra_error: float,
     minimum_distance: float,
+    distance_squared_t0: float,
     params: CcdParameters,
 ) -> float:
-    """Shared tail of the two CCD functions: rounding bound, coplanarity filter, then the search.
+    """Shared tail of the two CCD functions: rounding bound, motion-bound and coplanarity filters,
+    then the search.
 
-    ``magnitude`` is the per-axis largest |translated coordinate| of the query (M in the bound).
+    ``magnitude`` is the per-axis largest |translated coordinate| of the query (M in the bound);
+    ``distance_squared_t0`` the float32 squared distance of the pair at t0 (translated points).
     """
     err = _query_error(magnitude, extra_error, params)
     scale = wp.max(magnitude[0], wp.max(magnitude[1], magnitude[2]))
+    if _motion_cannot_reach(distance_squared_t0, q0, e10, e20, q1, e11, e21, triangle_domain, err, scale,
+                            minimum_distance):
+        return 2.0
     if minimum_distance == 0.0 and extra_error == 0.0:
         if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
             return 2.0
@@ -522,7 +578,8 @@ def vertex_face_ccd_toi(
     m = _abs_max(m, yb1)
     m = _abs_max(m, yc1)
     return _ccd_from_differences(yp0 - ya0, ya0 - yb0, ya0 - yc0, yp1 - ya1, ya1 - yb1, ya1 - yc1, 1, m,
-                                 extra_error, minimum_distance, params)
+                                 extra_error, minimum_distance, vertex_face_distance_squared(yp0, ya0, yb0, yc0),
+                                 params)
 
 
 @wp.func
@@ -563,7 +620,8 @@ def edge_edge_ccd_toi(
     m = _abs_max(m, yb01)
     m = _abs_max(m, yb11)
     return _ccd_from_differences(ya00 - yb00, ya10 - ya00, yb00 - yb10, ya01 - yb01, ya11 - ya01, yb01 - yb11, 0,
-                                 m, extra_error, minimum_distance, params)
+                                 m, extra_error, minimum_distance,
+                                 edge_edge_distance_squared(ya00, ya10, yb00, yb10), params)
 
 
 @wp.kernel

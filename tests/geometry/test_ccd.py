@@ -227,3 +227,47 @@ def test_deterministic(device: str) -> None:
     first = vertex_face_ccd(x0, x1, device=device)
     second = vertex_face_ccd(x0, x1, device=device)
     assert np.array_equal(first[0], second[0]) and np.array_equal(first[1], second[1])
+
+
+def _segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
+    """Float64 segment-segment distance by dense sampling of one parameter and exact projection."""
+    s = np.linspace(0.0, 1.0, 401)[:, None]
+    points = a0 + s * (a1 - a0)
+    d = b1 - b0
+    t = np.clip(((points - b0) @ d) / max(d @ d, 1e-300), 0.0, 1.0)[:, None]
+    return float(np.linalg.norm(points - (b0 + t * d), axis=1).min())
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), motion=st.floats(1e-4, 0.2), gap=st.floats(-0.02, 0.02))
+def test_motion_bound_filter_never_drops_a_near_pair(seed: int, motion: float, gap: float) -> None:
+    """Edge pairs resting or moving slowly near the minimum distance (the case the motion-bound filter
+    skips): whenever densely sampled float64 distances come below d_min by a margin, CCD reports it."""
+    rng = np.random.default_rng(seed)
+    d_min = 0.1
+    count = 64
+    a0 = rng.normal(size=(count, 3))
+    a1 = a0 + rng.normal(size=(count, 3))
+    direction = rng.normal(size=(count, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    # The b edge starts about d_min + motion + gap away and moves by about `motion`.
+    offset = direction * (d_min + motion + gap)
+    b0 = a0 + 0.3 * (a1 - a0) + offset + 0.01 * rng.normal(size=(count, 3))
+    b1 = b0 + rng.normal(size=(count, 3))
+    step = rng.normal(size=(count, 4, 3))
+    step *= motion / np.maximum(np.linalg.norm(step, axis=2, keepdims=True), 1e-12)
+    x0 = np.stack([a0, a1, b0, b1], axis=1)
+    x1 = x0 + step
+    hit, _ = edge_edge_ccd(x0, x1, d_min, device="cpu")
+    for i in range(count):
+        closest = min(_segment_distance(*((1 - t) * x0[i] + t * x1[i])) for t in np.linspace(0.0, 1.0, 41))
+        if closest < d_min * (1 - 1e-3):
+            assert hit[i], f"pair {i} comes within {closest:.6f} < {d_min} but CCD reports no contact"
+    # Static pairs clearly farther than d_min are excluded (the filter's purpose), nearer ones kept.
+    static, _ = edge_edge_ccd(x0, x0, d_min, device="cpu")
+    for i in range(count):
+        distance = _segment_distance(*x0[i])
+        if distance < d_min * (1 - 1e-3):
+            assert static[i]
+        elif distance > d_min * 1.01:
+            assert not static[i]
