@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from pscc.errors import InputError
-from pscc.scenes.scene_file import _config_to_toml, _dump_toml
+from pscc.scenes.toml_text import config_to_toml, dump_toml
 from pscc.sim.config import ClothMaterial, SolverConfig
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.scene import Scene
@@ -49,14 +49,14 @@ def builtin_scene_toml(name: str, size: dict[str, float | int], frames: int, sce
         "scene": {"frame_time": float(scene.frame_time), "steps_per_frame": int(scene.steps_per_frame)},
     }
     if materials is None:
-        data["material"] = _config_to_toml(scene.material)
+        data["material"] = config_to_toml(scene.material)
     else:
-        data["material"] = [_config_to_toml(m) for m in materials]
-    data["solver"] = _config_to_toml(scene.solver)
-    data["contact"] = _config_to_toml(contact)
+        data["material"] = [config_to_toml(m) for m in materials]
+    data["solver"] = config_to_toml(scene.solver)
+    data["contact"] = config_to_toml(contact)
     header = (f"# Resolved scene file of the built-in scene {name!r}, written by pscc simulate.\n"
               "# `pscc simulate scene.toml` reproduces the run. Format: pscc/scenes/builtin_file.py.\n")
-    return header + _dump_toml(data)
+    return header + dump_toml(data)
 
 
 def _config(cls: type, table: Any, source: str, key: str) -> Any:

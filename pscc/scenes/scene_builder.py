@@ -1,0 +1,793 @@
+"""Checking and building scene files: the TOML data of a scene file -> Scene, ContactConfig, resolved spec.
+
+:class:`SceneBuilder` walks the tables of ``docs/scene-files.md`` key by key; every problem raises
+:class:`pscc.errors.InputError` naming the scene file, the key path (``cloth[1].material.density``),
+the problem and the fix. :mod:`pscc.scenes.scene_file` is the public entry point.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import Field, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pscc.errors import InputError
+from pscc.mesh.generate import grid_sheet, icosphere
+from pscc.mesh.io import SUPPORTED_EXTENSIONS, load_mesh
+from pscc.mesh.mesh_data import MeshData
+from pscc.scenes.scene_motions import PivotedMotion, SequenceObstacle
+from pscc.scenes.toml_text import config_to_toml, field_kind
+from pscc.sim.config import ClothMaterial, SolverConfig
+from pscc.sim.contact_config import ContactConfig
+from pscc.sim.obstacles import Handle, KeyframedMotion, Obstacle, rotation_from_axis_angle, static_motion
+from pscc.sim.scene import Scene
+
+DEFAULT_FRAMES: int = 30
+"""Frames of a run when ``[scene] frames`` is not given."""
+
+DEFAULT_FRAME_RATE: float = 30.0
+"""Frames per second when neither ``frame_rate`` nor ``frame_time`` is given [1/s]."""
+
+DEFAULT_STEPS_PER_FRAME: int = 8
+"""Time steps per frame when ``steps_per_frame`` is not given."""
+
+FLATNESS_TOLERANCE: float = 1.0e-4
+"""A mesh counts as flat (so its rest shape can be its projection onto the best-fit plane) when no
+vertex is farther from that plane than this fraction of the mesh's largest extent. Dimensionless."""
+
+SIDE_TOLERANCE: float = 1.0e-4
+"""Default tolerance of the ``side`` selector, as a fraction of the piece's largest rest extent."""
+
+POSE_TOLERANCE: float = 1.0e-9
+"""A handle's keyframed pose at t = 0 must be the identity within this (rotation entries; translation
+in metres): handle keyframes are displacements from the initial positions."""
+
+SIDES: tuple[str, ...] = ("left", "right", "bottom", "top")
+"""Side names of the ``side`` selector: smallest u, largest u, smallest v, largest v (rest coordinates)."""
+
+CORNERS: tuple[str, ...] = ("bottom-left", "bottom-right", "top-left", "top-right")
+"""Corner names of the ``corner`` selector (rest coordinates; bottom/top = v, left/right = u)."""
+
+_REST_MODES: tuple[str, ...] = ("auto", "file", "plane")
+
+_TOP_KEYS = ("scene", "solver", "contact", "cloth", "obstacle")
+_SCENE_KEYS = ("name", "description", "frame_rate", "frame_time", "steps_per_frame", "frames")
+_PLACEMENT_KEYS = ("translate", "rotate", "scale")
+_CLOTH_KEYS = ("name", "mesh", "rest", "sheet", *_PLACEMENT_KEYS, "material", "pins", "handles")
+_SHEET_KEYS = ("size", "cells")
+_HANDLE_KEYS = ("name", "vertices", "times", "translations", "rotations", "pivot")
+_OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", *_PLACEMENT_KEYS, "keyframes")
+_OBSTACLE_SHAPES = ("mesh", "sphere", "box", "sequence")
+_SPHERE_KEYS = ("radius", "subdivisions")
+_BOX_KEYS = ("size",)
+_KEYFRAME_KEYS = ("times", "translations", "rotations")
+_SELECTOR_KEYS = ("ids", "side", "corner", "box", "tolerance")
+
+
+
+@dataclass
+class SceneFile:
+    """A loaded scene file.
+
+    Attributes:
+        path: absolute path of the TOML file.
+        spec: the resolved scene as plain TOML data (every key with its value, defaults filled in,
+            vertex selections as ids, paths absolute); :func:`resolved_scene_toml` writes it.
+        scene: the scene to simulate.
+        contact: the contact settings.
+        options: run options: ``frames`` (default frame count) and ``source`` (``str(path)``).
+    """
+
+    path: Path
+    spec: dict[str, Any]
+    scene: Scene
+    contact: ContactConfig
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class _Piece:
+    """One cloth piece before concatenation (local vertex ids)."""
+
+    name: str
+    vertices: np.ndarray  # (n, 3) float32, placed
+    faces: np.ndarray  # (m, 3) int32
+    rest: np.ndarray  # (n, 2) float32
+    material: ClothMaterial
+    handles: list[tuple[str, np.ndarray, Any]] = field(default_factory=list)  # (name, local ids, motion or None)
+
+
+def _type_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return "boolean"
+    if isinstance(value, int):
+        return "integer"
+    if isinstance(value, float):
+        return "float"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, list):
+        return "array"
+    if isinstance(value, dict):
+        return "table"
+    return type(value).__name__
+
+
+def _show(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class SceneBuilder:
+    """Checks a parsed scene file and builds the scene and the resolved spec."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.source = str(path)
+        self.base = path.parent
+
+    # ------------------------------------------------------------ error helpers
+
+    def error(self, key: str, problem: str, fix: str) -> InputError:
+        return InputError(self.source, key, problem, fix)
+
+    def rewrap(self, exc: InputError, key: str) -> InputError:
+        """An InputError from a lower layer, reported at ``key`` of this file."""
+        inner = "" if exc.source in ("argument", "motion", "ClothMaterial", "SolverConfig", "ContactConfig") \
+            else f"{exc.source}: "
+        return InputError(self.source, key, f"{inner}{exc.field}: {exc.problem}", exc.fix)
+
+    def table(self, value: Any, key: str, example: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(key, f"expected a table, got {_type_name(value)} {_show(value)}", f"write it as {example}")
+        return value
+
+    def check_keys(self, table: Mapping[str, Any], allowed: Iterable[str], key: str,
+                   hints: Mapping[str, str] | None = None) -> None:
+        allowed = tuple(allowed)
+        for name in table:
+            if name in allowed:
+                continue
+            where = f"{key}.{name}" if key else name
+            if hints and name in hints:
+                raise self.error(where, f"unknown key {name!r} here", hints[name])
+            close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.6)
+            listing = ", ".join(allowed)
+            fix = (f"did you mean {close[0]!r}? (allowed keys here: {listing})" if close
+                   else f"remove it or use one of the allowed keys: {listing}")
+            raise self.error(where, f"unknown key {name!r}", fix)
+
+    def number(self, value: Any, key: str, *, minimum: float | None = None, strict: bool = True,
+               example: str = "1.0") -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(key, f"expected a number, got {_type_name(value)} {_show(value)}",
+                             f"write a number, e.g. {key.rsplit('.', 1)[-1]} = {example}")
+        number = float(value)
+        if not math.isfinite(number):
+            raise self.error(key, f"{value!r} is not finite", "write a finite number")
+        if minimum is not None and (number <= minimum if strict else number < minimum):
+            relation = ">" if strict else ">="
+            raise self.error(key, f"{value!r} is not {relation} {minimum:g}", f"write a number {relation} {minimum:g}")
+        return number
+
+    def integer(self, value: Any, key: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, f"expected an integer, got {_type_name(value)} {_show(value)}",
+                             "write a whole number without a decimal point, e.g. 8")
+        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+            bounds = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
+            raise self.error(key, f"{value} is not {bounds}", f"write an integer {bounds}")
+        return int(value)
+
+    def string(self, value: Any, key: str, choices: Iterable[str] | None = None) -> str:
+        if not isinstance(value, str):
+            raise self.error(key, f"expected a string, got {_type_name(value)} {_show(value)}",
+                             'write it in double quotes, e.g. "text"')
+        if choices is not None:
+            choices = tuple(choices)
+            if value not in choices:
+                close = difflib.get_close_matches(value, choices, n=1, cutoff=0.6)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                raise self.error(key, f"{value!r} is not one of {', '.join(map(repr, choices))}",
+                                 f"{hint}use one of {', '.join(map(repr, choices))}")
+        return value
+
+    def boolean(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(key, f"expected true or false, got {_type_name(value)} {_show(value)}",
+                             "write true or false (lower case, no quotes)")
+        return value
+
+    def vector(self, value: Any, key: str, length: int, *, minimum: float | None = None,
+               example: str = "[0.0, 0.0, 0.0]") -> list[float]:
+        if not isinstance(value, list) or len(value) != length:
+            got = f"{len(value)} entries" if isinstance(value, list) else f"{_type_name(value)} {_show(value)}"
+            raise self.error(key, f"expected an array of {length} numbers, got {got}", f"write e.g. {example}")
+        return [self.number(item, f"{key}[{i}]", minimum=minimum) for i, item in enumerate(value)]
+
+    def int_vector(self, value: Any, key: str, length: int, minimum: int, example: str) -> list[int]:
+        if not isinstance(value, list) or len(value) != length:
+            got = f"{len(value)} entries" if isinstance(value, list) else f"{_type_name(value)} {_show(value)}"
+            raise self.error(key, f"expected an array of {length} integers, got {got}", f"write e.g. {example}")
+        return [self.integer(item, f"{key}[{i}]", minimum=minimum) for i, item in enumerate(value)]
+
+    def rows(self, value: Any, key: str, count: int, what: str) -> list[list[float]]:
+        if not isinstance(value, list):
+            raise self.error(key, f"expected an array of [x, y, z] rows, got {_type_name(value)} {_show(value)}",
+                             f"write one [x, y, z] {what} per keyframe time")
+        if len(value) != count:
+            raise self.error(key, f"has {len(value)} rows but times has {count}",
+                             f"give one [x, y, z] {what} per keyframe time ({count})")
+        return [self.vector(row, f"{key}[{i}]", 3) for i, row in enumerate(value)]
+
+    def file_path(self, value: Any, key: str) -> Path:
+        text = self.string(value, key)
+        if not text:
+            raise self.error(key, "is empty", "write the path of a file, relative to the scene file")
+        candidate = Path(os.path.expanduser(text))
+        return Path(os.path.abspath(candidate if candidate.is_absolute() else self.base / candidate))
+
+    def mesh(self, value: Any, key: str) -> tuple[Path, MeshData]:
+        mesh_path = self.file_path(value, key)
+        if mesh_path.suffix.lower() not in SUPPORTED_EXTENSIONS:
+            raise self.error(key, f"{str(mesh_path)!r} has the extension {mesh_path.suffix or '(none)'!r}",
+                             f"use a mesh file ending in one of {', '.join(SUPPORTED_EXTENSIONS)}")
+        if not mesh_path.is_file():
+            raise self.error(key, f"mesh file {str(mesh_path)!r} does not exist",
+                             "check the path; relative paths are relative to the scene file's folder "
+                             f"{str(self.base)!r}")
+        try:
+            return mesh_path, load_mesh(mesh_path)
+        except InputError as exc:
+            raise self.rewrap(exc, key) from exc
+
+    # ------------------------------------------------------------ top level
+
+    def build(self, raw: dict[str, Any]) -> SceneFile:
+        self.check_keys(raw, _TOP_KEYS, "", hints={
+            "clothes": "write each cloth piece as a [[cloth]] table", "cloths": "write each piece as [[cloth]]",
+            "obstacles": "write each obstacle as an [[obstacle]] table",
+            **{name: f"put {name} in the [scene] table" for name in _SCENE_KEYS},
+        })
+        spec: dict[str, Any] = {}
+        scene_spec = self.scene_table(raw.get("scene", {}))
+        spec["scene"] = scene_spec
+        frame_time = (scene_spec["frame_time"] if "frame_time" in scene_spec else 1.0 / scene_spec["frame_rate"])
+        solver, spec["solver"] = self.config(raw.get("solver", {}), "solver", SolverConfig)
+        contact, spec["contact"] = self.config(raw.get("contact", {}), "contact", ContactConfig)
+
+        if "cloth" not in raw:
+            raise self.error("cloth", "the scene has no cloth", "add at least one [[cloth]] table with "
+                             "mesh = \"file.obj\" or a [cloth.sheet] table")
+        cloth_raw = raw["cloth"]
+        if isinstance(cloth_raw, dict):
+            raise self.error("cloth", "is a single [cloth] table", "write each piece as [[cloth]] (double brackets)")
+        if not isinstance(cloth_raw, list) or not cloth_raw or not all(isinstance(c, dict) for c in cloth_raw):
+            raise self.error("cloth", f"expected one or more [[cloth]] tables, got {_show(cloth_raw)}",
+                             "write each cloth piece as a [[cloth]] table")
+        pieces: list[_Piece] = []
+        spec["cloth"] = []
+        names: set[str] = set()
+        for index, piece_raw in enumerate(cloth_raw):
+            piece, piece_spec = self.cloth(piece_raw, index)
+            if piece.name in names:
+                raise self.error(f"cloth[{index}].name", f"the name {piece.name!r} is used twice",
+                                 "give every cloth piece its own name")
+            names.add(piece.name)
+            pieces.append(piece)
+            spec["cloth"].append(piece_spec)
+
+        obstacle_raw = raw.get("obstacle", [])
+        if isinstance(obstacle_raw, dict):
+            raise self.error("obstacle", "is a single [obstacle] table",
+                             "write each obstacle as [[obstacle]] (double brackets)")
+        if not isinstance(obstacle_raw, list) or not all(isinstance(o, dict) for o in obstacle_raw):
+            raise self.error("obstacle", f"expected [[obstacle]] tables, got {_show(obstacle_raw)}",
+                             "write each obstacle as an [[obstacle]] table")
+        obstacles: list[Any] = []
+        spec["obstacle"] = []
+        for index, obstacle_table in enumerate(obstacle_raw):
+            obstacle, obstacle_spec = self.obstacle(obstacle_table, index, frame_time)
+            if obstacle.name in names:
+                raise self.error(f"obstacle[{index}].name", f"the name {obstacle.name!r} is used twice",
+                                 "give every cloth piece and obstacle its own name")
+            names.add(obstacle.name)
+            obstacles.append(obstacle)
+            spec["obstacle"].append(obstacle_spec)
+        if not spec["obstacle"]:
+            del spec["obstacle"]
+
+        vertices, faces, rest, object_ids, handles = [], [], [], [], []
+        offset = 0
+        for index, piece in enumerate(pieces):
+            vertices.append(piece.vertices)
+            faces.append(piece.faces + offset)
+            rest.append(piece.rest)
+            object_ids.append(np.full(piece.faces.shape[0], index, dtype=np.int32))
+            for name, ids, motion in piece.handles:
+                handles.append(Handle(ids + offset, static_motion if motion is None else motion, name=name))
+            offset += piece.vertices.shape[0]
+        scene = Scene(
+            name=scene_spec["name"], description=scene_spec["description"],
+            vertices=np.ascontiguousarray(np.concatenate(vertices), dtype=np.float32),
+            faces=np.ascontiguousarray(np.concatenate(faces), dtype=np.int32),
+            rest=np.ascontiguousarray(np.concatenate(rest), dtype=np.float32),
+            object_ids=np.concatenate(object_ids),
+            material=[piece.material for piece in pieces], solver=solver, handles=handles,
+            obstacles=obstacles, frame_time=frame_time, steps_per_frame=scene_spec["steps_per_frame"],
+        )
+        options = {"frames": scene_spec["frames"], "source": self.source}
+        return SceneFile(path=self.path, spec=spec, scene=scene, contact=contact, options=options)
+
+    def scene_table(self, raw: Any) -> dict[str, Any]:
+        table = self.table(raw, "scene", "[scene] with name, frame_rate, steps_per_frame, frames")
+        solver_names = [f.name for f in fields(SolverConfig)]
+        self.check_keys(table, _SCENE_KEYS, "scene",
+                        hints={name: f"{name} belongs in the [solver] table" for name in solver_names})
+        spec: dict[str, Any] = {
+            "name": self.string(table.get("name", self.path.stem), "scene.name"),
+            "description": self.string(table.get("description", ""), "scene.description"),
+        }
+        if "frame_rate" in table and "frame_time" in table:
+            raise self.error("scene.frame_time", "both frame_rate and frame_time are given",
+                             "give only one of them (frame_time = 1 / frame_rate)")
+        if "frame_time" in table:
+            spec["frame_time"] = self.number(table["frame_time"], "scene.frame_time", minimum=0.0,
+                                             example="0.04  # seconds")
+        else:
+            spec["frame_rate"] = self.number(table.get("frame_rate", DEFAULT_FRAME_RATE), "scene.frame_rate",
+                                             minimum=0.0, example="30  # frames per second")
+        spec["steps_per_frame"] = self.integer(table.get("steps_per_frame", DEFAULT_STEPS_PER_FRAME),
+                                               "scene.steps_per_frame", minimum=1)
+        spec["frames"] = self.integer(table.get("frames", DEFAULT_FRAMES), "scene.frames", minimum=1)
+        return spec
+
+    def config(self, raw: Any, key: str, cls: type) -> tuple[Any, dict[str, Any]]:
+        """A frozen config dataclass from a table of its fields; returns (config, resolved table)."""
+        table = self.table(raw, key, f"[{key}] with fields of {cls.__name__}")
+        config_fields = {f.name: f for f in fields(cls)}
+        self.check_keys(table, config_fields, key)
+        values: dict[str, Any] = {}
+        for name, value in table.items():
+            values[name] = self.config_value(value, f"{key}.{name}", config_fields[name])
+        try:
+            config = cls(**values).validate()
+        except InputError as exc:
+            raise self.rewrap_field(exc, key) from exc
+        return config, config_to_toml(config)
+
+    def rewrap_field(self, exc: InputError, key: str) -> InputError:
+        return InputError(self.source, f"{key}.{exc.field}", exc.problem, exc.fix)
+
+    def config_value(self, value: Any, key: str, spec_field: Field) -> Any:
+        kind = field_kind(spec_field)
+        default = spec_field.default
+        if kind == "vector":
+            return tuple(self.vector(value, key, len(default)))
+        if kind == "bool":
+            return self.boolean(value, key)
+        if kind == "int":
+            return self.integer(value, key)
+        if kind == "float":
+            return self.number(value, key)
+        if kind == "auto_float":
+            if value == "auto":
+                return None
+            if isinstance(value, str):
+                raise self.error(key, f"{value!r} is neither a number nor \"auto\"",
+                                 "write a number or \"auto\" (the automatic value)")
+            return self.number(value, key)
+        if kind == "str":
+            return self.string(value, key)
+        return value
+
+    # ------------------------------------------------------------ cloth
+
+    def placement(self, table: Mapping[str, Any], key: str) -> tuple[dict[str, Any], np.ndarray, np.ndarray, float]:
+        translate = self.vector(table.get("translate", [0.0, 0.0, 0.0]), f"{key}.translate", 3,
+                                example="[0.0, 0.0, 0.5]  # metres")
+        rotate = self.vector(table.get("rotate", [0.0, 0.0, 0.0]), f"{key}.rotate", 3,
+                             example="[90.0, 0.0, 0.0]  # rotation vector in degrees")
+        scale = self.number(table.get("scale", 1.0), f"{key}.scale", minimum=0.0, example="0.01")
+        rotation = rotation_from_axis_angle(np.radians(np.asarray(rotate, dtype=np.float64)))
+        spec = {"translate": translate, "rotate": rotate, "scale": scale}
+        return spec, rotation, np.asarray(translate, dtype=np.float64), scale
+
+    def cloth(self, raw: dict[str, Any], index: int) -> tuple[_Piece, dict[str, Any]]:
+        key = f"cloth[{index}]"
+        material_names = [f.name for f in fields(ClothMaterial)]
+        self.check_keys(raw, _CLOTH_KEYS, key, hints={
+            **{name: f"put {name} in the piece's [cloth.material] table ({key}.material.{name})"
+               for name in material_names},
+            "size": "put size in a [cloth.sheet] table", "cells": "put cells in a [cloth.sheet] table",
+            "handle": "write each handle as a [[cloth.handles]] table", "pin": "did you mean 'pins'?",
+        })
+        name = self.string(raw.get("name", f"cloth{index}"), f"{key}.name")
+        spec: dict[str, Any] = {"name": name}
+        if ("mesh" in raw) == ("sheet" in raw):
+            problem = "has both mesh and sheet" if "mesh" in raw else "has neither mesh nor sheet"
+            raise self.error(key, problem, "give either mesh = \"file.obj\" or a [cloth.sheet] table "
+                             "with size = [w, h] and cells = [nx, ny]")
+        placement, rotation, translation, scale = self.placement(raw, key)
+        if "sheet" in raw:
+            if "rest" in raw:
+                raise self.error(f"{key}.rest", "rest applies to mesh pieces only",
+                                 "remove it (a sheet's rest shape is the flat grid)")
+            sheet = self.table(raw["sheet"], f"{key}.sheet", "{ size = [1.0, 1.0], cells = [20, 20] }")
+            self.check_keys(sheet, _SHEET_KEYS, f"{key}.sheet")
+            for required in _SHEET_KEYS:
+                if required not in sheet:
+                    raise self.error(f"{key}.sheet.{required}", "is missing",
+                                     "give size = [width, height] in metres and cells = [nx, ny]")
+            size = self.vector(sheet["size"], f"{key}.sheet.size", 2, minimum=0.0, example="[1.0, 1.0]  # metres")
+            cells = self.int_vector(sheet["cells"], f"{key}.sheet.cells", 2, 1, "[20, 20]")
+            local, faces, rest = grid_sheet(cells[0], cells[1], size[0], size[1])
+            local = local.astype(np.float64) - np.array([size[0] / 2.0, size[1] / 2.0, 0.0])
+            rest = rest.astype(np.float64) * scale
+            spec["sheet"] = {"size": size, "cells": cells}
+        else:
+            mesh_path, mesh = self.mesh(raw["mesh"], f"{key}.mesh")
+            mode = self.string(raw.get("rest", "auto"), f"{key}.rest", _REST_MODES)
+            local = mesh.vertices.astype(np.float64)
+            faces = mesh.faces
+            rest, mode = self.mesh_rest(mesh, mode, scale, f"{key}.rest", str(mesh_path))
+            spec["mesh"] = str(mesh_path)
+            spec["rest"] = mode
+        vertices = (scale * local) @ rotation.T + translation
+        spec.update(placement)
+        material, spec["material"] = self.config(raw.get("material", {}), f"{key}.material", ClothMaterial)
+        piece = _Piece(name=name, vertices=vertices.astype(np.float32), faces=np.asarray(faces, np.int32),
+                       rest=np.asarray(rest, dtype=np.float32), material=material)
+        self.cloth_handles(raw, piece, key, spec)
+        return piece, spec
+
+    def mesh_rest(self, mesh: Any, mode: str, scale: float, key: str, mesh_path: str) -> tuple[np.ndarray, str]:
+        """Rest (u, v) coordinates of a mesh piece and the resolved mode (``file`` or ``plane``)."""
+        has_rest = mesh.rest is not None
+        if mode == "file" or (mode == "auto" and has_rest):
+            if not has_rest:
+                raise self.error(key, f"rest = \"file\" but {mesh_path!r} has no rest coordinates",
+                                 "use an NPZ file with a 'rest' key of (n, 2) (u, v) coordinates in metres, or "
+                                 "rest = \"plane\" to project the positions onto their best-fit plane")
+            file_rest = mesh.rest.astype(np.float64) * scale
+            if file_rest.shape[1] == 2:
+                return file_rest, "file"
+            flat, distance, size = _plane_coordinates(file_rest)
+            if distance > FLATNESS_TOLERANCE * size:
+                raise self.error(key, f"the 3-D rest coordinates in {mesh_path!r} are not flat (a vertex is "
+                                 f"{distance:.3g} m from their best-fit plane)",
+                                 "store (n, 2) (u, v) rest coordinates in the NPZ 'rest' key")
+            return flat, "file"
+        positions = mesh.vertices.astype(np.float64) * scale
+        flat, distance, size = _plane_coordinates(positions)
+        if mode == "auto" and distance > FLATNESS_TOLERANCE * size:
+            raise self.error(key, f"{mesh_path!r} has no rest coordinates and is not flat (a vertex is "
+                             f"{distance:.3g} m from the best-fit plane of the positions, more than "
+                             f"{FLATNESS_TOLERANCE:g} x the mesh size), so its rest shape is unknown",
+                             "use an NPZ file with a 'rest' key of (n, 2) (u, v) coordinates in metres, or set "
+                             "rest = \"plane\" to use the projection onto the best-fit plane anyway (this "
+                             "distorts the rest lengths of curved parts)")
+        return flat, "plane"
+
+    def cloth_handles(self, raw: Mapping[str, Any], piece: _Piece, key: str, spec: dict[str, Any]) -> None:
+        """Pins and [[cloth.handles]] of a piece, into ``piece.handles`` and ``spec``."""
+        owner: dict[int, str] = {}
+
+        def claim(ids: np.ndarray, where: str) -> None:
+            for vertex in ids.tolist():
+                if vertex in owner:
+                    raise self.error(where, f"vertex {vertex} is also selected by {owner[vertex]}",
+                                     "select each vertex in only one of pins and the handles")
+                owner[vertex] = where
+
+        pins = np.zeros(0, dtype=np.int64)
+        if "pins" in raw:
+            pins = self.select(raw["pins"], piece, f"{key}.pins", allow_empty=True)
+            claim(pins, f"{key}.pins")
+            if pins.size:
+                piece.handles.append((f"{piece.name}.pins", pins, None))
+        spec["pins"] = [int(v) for v in pins]
+        handles_raw = raw.get("handles", [])
+        if isinstance(handles_raw, dict) or not isinstance(handles_raw, list) \
+                or not all(isinstance(h, dict) for h in handles_raw):
+            raise self.error(f"{key}.handles", f"expected [[cloth.handles]] tables, got {_show(handles_raw)}",
+                             "write each handle as a [[cloth.handles]] table (double brackets)")
+        spec["handles"] = []
+        for j, handle_raw in enumerate(handles_raw):
+            where = f"{key}.handles[{j}]"
+            self.check_keys(handle_raw, _HANDLE_KEYS, where, hints={
+                "keyframes": "a handle takes times, translations and rotations directly in its table",
+                "ids": "write vertices = [ids] (or a selector table)"})
+            name = self.string(handle_raw.get("name", f"{piece.name}.handles[{j}]"), f"{where}.name")
+            if "vertices" not in handle_raw:
+                raise self.error(f"{where}.vertices", "is missing",
+                                 "select the handle's vertices, e.g. vertices = { side = \"left\" } or [0, 1, 2]")
+            ids = self.select(handle_raw["vertices"], piece, f"{where}.vertices")
+            claim(ids, f"{where}.vertices")
+            keyframes = self.keyframes(handle_raw, where)
+            if "pivot" in handle_raw:
+                pivot = self.vector(handle_raw["pivot"], f"{where}.pivot", 3, example="[0.0, 0.0, 0.5]  # metres")
+            else:
+                pivot = [float(c) for c in piece.vertices[ids].astype(np.float64).mean(axis=0)]
+            motion = PivotedMotion(self.keyframed_motion(keyframes, where), np.asarray(pivot, dtype=np.float64))
+            rotation, translation = motion(0.0)
+            if np.abs(rotation - np.eye(3)).max() > POSE_TOLERANCE or np.abs(translation).max() > POSE_TOLERANCE:
+                raise self.error(f"{where}.translations", "the handle's keyframed pose at t = 0 is not the identity, "
+                                 "so its vertices would jump at the start",
+                                 "handle keyframes are displacements from the initial positions: make the "
+                                 "translation and rotation at t = 0 zero")
+            piece.handles.append((name, ids, motion))
+            spec["handles"].append({"name": name, "vertices": [int(v) for v in ids], **keyframes, "pivot": pivot})
+
+    def select(self, value: Any, piece: _Piece, key: str, allow_empty: bool = False) -> np.ndarray:
+        """Sorted unique local vertex ids of a selection (ids, selector table, or a list of both)."""
+        n = piece.vertices.shape[0]
+        example = "[0, 1, 2] or { side = \"top\" }, { corner = \"top-left\" }, { box = [[x0, y0, z0], [x1, y1, z1]] }"
+        items = value if isinstance(value, list) else [value]
+        selected: list[np.ndarray] = []
+        for i, item in enumerate(items):
+            where = f"{key}[{i}]" if isinstance(value, list) else key
+            if isinstance(item, bool) or not isinstance(item, int | dict):
+                raise self.error(where, f"expected a vertex id or a selector table, got {_type_name(item)} "
+                                 f"{_show(item)}", f"write e.g. {example}")
+            if isinstance(item, int):
+                selected.append(self.ids([item], n, where))
+                continue
+            self.check_keys(item, _SELECTOR_KEYS, where)
+            chosen = [k for k in _SELECTOR_KEYS if k in item and k != "tolerance"]
+            if not chosen:
+                raise self.error(where, "the selector table selects nothing",
+                                 f"give ids, side, corner or box: {example}")
+            if "tolerance" in item and "side" not in item:
+                raise self.error(f"{where}.tolerance", "tolerance applies to side only", "remove it or add side")
+            if "ids" in item:
+                if not isinstance(item["ids"], list):
+                    raise self.error(f"{where}.ids", f"expected an array of vertex ids, got {_show(item['ids'])}",
+                                     "write ids = [0, 1, 2]")
+                selected.append(self.ids(item["ids"], n, f"{where}.ids"))
+            if "side" in item or "corner" in item:
+                rest = piece.rest.astype(np.float64)
+                low, high = rest.min(axis=0), rest.max(axis=0)
+                extent = float((high - low).max())
+            if "side" in item:
+                tolerance = SIDE_TOLERANCE * extent
+                if "tolerance" in item:
+                    tolerance = self.number(item["tolerance"], f"{where}.tolerance", minimum=0.0, strict=False)
+                for side in self.names(item["side"], f"{where}.side", SIDES):
+                    axis = 0 if side in ("left", "right") else 1
+                    if side in ("left", "bottom"):
+                        ids = np.flatnonzero(rest[:, axis] <= low[axis] + tolerance)
+                    else:
+                        ids = np.flatnonzero(rest[:, axis] >= high[axis] - tolerance)
+                    selected.append(ids)
+            if "corner" in item:
+                for corner in self.names(item["corner"], f"{where}.corner", CORNERS):
+                    vertical, horizontal = corner.split("-")
+                    target = np.array([low[0] if horizontal == "left" else high[0],
+                                       low[1] if vertical == "bottom" else high[1]])
+                    selected.append(np.array([int(np.argmin(((rest - target) ** 2).sum(axis=1)))]))
+            if "box" in item:
+                box = item["box"]
+                if not isinstance(box, list) or len(box) != 2:
+                    raise self.error(f"{where}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got "
+                                     f"{_show(box)}", "write box = [[xmin, ymin, zmin], [xmax, ymax, zmax]] in metres")
+                lower = np.array(self.vector(box[0], f"{where}.box[0]", 3))
+                upper = np.array(self.vector(box[1], f"{where}.box[1]", 3))
+                if np.any(lower > upper):
+                    raise self.error(f"{where}.box", "a minimum corner coordinate exceeds the maximum",
+                                     "write box = [[xmin, ymin, zmin], [xmax, ymax, zmax]] with min <= max")
+                positions = piece.vertices.astype(np.float64)
+                inside = np.all((positions >= lower) & (positions <= upper), axis=1)
+                ids = np.flatnonzero(inside)
+                if ids.size == 0:
+                    raise self.error(f"{where}.box", "the box contains no vertex of the piece (placed positions: "
+                                     f"{positions.min(axis=0).round(4).tolist()} to "
+                                     f"{positions.max(axis=0).round(4).tolist()})",
+                                     "enlarge or move the box; it is in scene coordinates, after the placement")
+                selected.append(ids)
+        result = np.unique(np.concatenate(selected)) if selected else np.zeros(0, dtype=np.int64)
+        if result.size == 0 and not allow_empty:
+            raise self.error(key, "selects no vertex", f"select at least one vertex, e.g. {example}")
+        return result.astype(np.int64)
+
+    def ids(self, values: list[Any], n: int, key: str) -> np.ndarray:
+        out = []
+        for i, value in enumerate(values):
+            where = f"{key}[{i}]" if len(values) > 1 or key.endswith("ids") else key
+            vertex = self.integer(value, where)
+            if not 0 <= vertex < n:
+                raise self.error(where, f"vertex id {vertex} is out of range: the piece has {n} vertices",
+                                 f"use 0-based ids in [0, {n - 1}] (ids count within the piece, in its mesh order)")
+            out.append(vertex)
+        return np.asarray(out, dtype=np.int64)
+
+    def names(self, value: Any, key: str, choices: tuple[str, ...]) -> list[str]:
+        items = value if isinstance(value, list) else [value]
+        if not items:
+            raise self.error(key, "is empty", f"use one or more of {', '.join(map(repr, choices))}")
+        return [self.string(item, f"{key}[{i}]" if isinstance(value, list) else key, choices)
+                for i, item in enumerate(items)]
+
+    # ------------------------------------------------------------ keyframes
+
+    def keyframes(self, table: Mapping[str, Any], key: str) -> dict[str, Any]:
+        """Resolved ``times`` / ``translations`` / ``rotations`` (degrees) of a table holding them."""
+        if "times" not in table:
+            raise self.error(f"{key}.times", "is missing",
+                             "give the keyframe times in seconds, e.g. times = [0.0, 1.0]")
+        times_raw = table["times"]
+        if not isinstance(times_raw, list) or not times_raw:
+            raise self.error(f"{key}.times", f"expected a non-empty array of times, got {_show(times_raw)}",
+                             "write times = [0.0, 1.0] (seconds, increasing)")
+        times = [self.number(t, f"{key}.times[{i}]") for i, t in enumerate(times_raw)]
+        for i in range(1, len(times)):
+            if not times[i] > times[i - 1]:
+                raise self.error(f"{key}.times", f"times[{i}] = {times[i]:g} is not greater than times[{i - 1}] = "
+                                 f"{times[i - 1]:g}", "list the keyframe times in strictly increasing order")
+        zeros = [[0.0, 0.0, 0.0] for _ in times]
+        translations = self.rows(table.get("translations", zeros), f"{key}.translations", len(times), "translation")
+        rotations = self.rows(table.get("rotations", zeros), f"{key}.rotations", len(times), "rotation vector")
+        return {"times": times, "translations": translations, "rotations": rotations}
+
+    def keyframed_motion(self, keyframes: Mapping[str, Any], key: str,
+                         offset: np.ndarray | None = None) -> KeyframedMotion:
+        translations = np.asarray(keyframes["translations"], dtype=np.float64)
+        if offset is not None:
+            translations = translations + offset
+        try:
+            return KeyframedMotion(times=np.asarray(keyframes["times"], dtype=np.float64), translations=translations,
+                                   rotations=np.radians(np.asarray(keyframes["rotations"], dtype=np.float64)))
+        except InputError as exc:
+            raise self.rewrap_field(exc, key) from exc
+
+    # ------------------------------------------------------------ obstacles
+
+    def obstacle(self, raw: dict[str, Any], index: int, frame_time: float) -> tuple[Any, dict[str, Any]]:
+        key = f"obstacle[{index}]"
+        self.check_keys(raw, _OBSTACLE_KEYS, key, hints={
+            "times": "put times in the keyframes table: keyframes = { times = [...], translations = [...] }",
+            "translations": "put translations in the keyframes table",
+            "rotations": "put rotations in the keyframes table",
+            "radius": "write sphere = { radius = 0.25 }", "material": "obstacles have no material"})
+        name = self.string(raw.get("name", f"obstacle{index}"), f"{key}.name")
+        spec: dict[str, Any] = {"name": name}
+        shapes = [s for s in _OBSTACLE_SHAPES if s in raw]
+        if len(shapes) != 1:
+            problem = f"has {' and '.join(shapes)}" if shapes else "has no shape"
+            raise self.error(key, problem, "give exactly one of mesh = \"file.obj\", sphere = { radius = 0.25 }, "
+                             "box = { size = [1.0, 1.0, 0.1] } or sequence = \"body/frame_*.obj\"")
+        shape = shapes[0]
+        placement, rotation, translation, scale = self.placement(raw, key)
+        if shape == "sequence":
+            if "keyframes" in raw:
+                raise self.error(f"{key}.keyframes", "a mesh sequence cannot also have keyframes",
+                                 "remove keyframes (the sequence's files give the motion) or use mesh = \"file\"")
+            files, frames, faces = self.sequence(raw["sequence"], f"{key}.sequence")
+            placed = (scale * frames) @ rotation.T + translation
+            spec["sequence"] = [str(f) for f in files]
+            spec.update(placement)
+            return SequenceObstacle(placed, faces, frame_time=frame_time, name=name), spec
+        if shape == "mesh":
+            mesh_path, mesh = self.mesh(raw["mesh"], f"{key}.mesh")
+            local, faces = mesh.vertices.astype(np.float64), mesh.faces
+            spec["mesh"] = str(mesh_path)
+        elif shape == "sphere":
+            table = self.table(raw["sphere"], f"{key}.sphere", "sphere = { radius = 0.25, subdivisions = 2 }")
+            self.check_keys(table, _SPHERE_KEYS, f"{key}.sphere")
+            if "radius" not in table:
+                raise self.error(f"{key}.sphere.radius", "is missing", "write sphere = { radius = 0.25 } (metres)")
+            radius = self.number(table["radius"], f"{key}.sphere.radius", minimum=0.0, example="0.25")
+            subdivisions = self.integer(table.get("subdivisions", 2), f"{key}.sphere.subdivisions",
+                                        minimum=0, maximum=5)
+            local, faces = icosphere(radius, subdivisions)
+            local = local.astype(np.float64)
+            spec["sphere"] = {"radius": radius, "subdivisions": subdivisions}
+        else:
+            table = self.table(raw["box"], f"{key}.box", "box = { size = [1.0, 1.0, 0.1] }")
+            self.check_keys(table, _BOX_KEYS, f"{key}.box")
+            if "size" not in table:
+                raise self.error(f"{key}.box.size", "is missing", "write box = { size = [sx, sy, sz] } (metres)")
+            size = self.vector(table["size"], f"{key}.box.size", 3, minimum=0.0, example="[1.0, 1.0, 0.1]")
+            local, faces = _box(size)
+            spec["box"] = {"size": size}
+        spec.update(placement)
+        shaped = (scale * local) @ rotation.T
+        if "keyframes" in raw:
+            table = self.table(raw["keyframes"], f"{key}.keyframes",
+                               "keyframes = { times = [0.0, 1.0], translations = [[0, 0, 0], [0, 0, 0.1]] }")
+            self.check_keys(table, _KEYFRAME_KEYS, f"{key}.keyframes")
+            keyframes = self.keyframes(table, f"{key}.keyframes")
+            spec["keyframes"] = keyframes
+            motion = self.keyframed_motion(keyframes, f"{key}.keyframes", offset=translation)
+            return Obstacle(shaped, faces, motion=motion, name=name), spec
+        return Obstacle(shaped + translation, faces, name=name), spec
+
+    def sequence(self, value: Any, key: str) -> tuple[list[Path], np.ndarray, np.ndarray]:
+        """Files, (k, n, 3) float64 positions and faces of a mesh sequence (glob pattern or list of files)."""
+        if isinstance(value, str):
+            pattern = self.file_path(value, key)
+            files = _natural_sorted(_glob(pattern))
+            if not files:
+                raise self.error(key, f"the pattern {str(pattern)!r} matches no file",
+                                 "check the pattern; it is relative to the scene file's folder, e.g. "
+                                 "\"body/frame_*.obj\"")
+        elif isinstance(value, list) and value:
+            files = [self.file_path(item, f"{key}[{i}]") for i, item in enumerate(value)]
+        else:
+            raise self.error(key, f"expected a glob pattern or a non-empty array of files, got {_show(value)}",
+                             "write sequence = \"body/frame_*.obj\" (one mesh file per frame)")
+        frames: list[np.ndarray] = []
+        faces: np.ndarray | None = None
+        for i, file in enumerate(files):
+            where = f"{key}[{i}]" if isinstance(value, list) else key
+            _, mesh = self.mesh(str(file), where)
+            if faces is None:
+                faces = mesh.faces
+            elif mesh.vertex_count != frames[0].shape[0] or not np.array_equal(mesh.faces, faces):
+                raise self.error(where, f"{str(file)!r} (frame {i}) does not have the topology of frame 0 "
+                                 f"{str(files[0])!r} ({mesh.vertex_count} vertices / {mesh.face_count} faces vs "
+                                 f"{frames[0].shape[0]} / {faces.shape[0]})",
+                                 "export every frame with the same vertices and faces, in the same order")
+            frames.append(mesh.vertices.astype(np.float64))
+        assert faces is not None
+        return files, np.stack(frames), faces
+
+
+def _plane_coordinates(points: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(u, v) coordinates of points in their best-fit plane, the largest distance to it, and the size.
+
+    The plane goes through the centroid; its normal is the direction of least variance, oriented so
+    that its largest component is positive. The u axis is the x axis projected onto the plane (the
+    y axis when the plane is nearly perpendicular to x), v = normal x u. For points in a plane
+    z = const this gives u = x - mean(x), v = y - mean(y).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    centred = points - points.mean(axis=0)
+    _, _, basis = np.linalg.svd(centred, full_matrices=False)
+    normal = basis[-1] if basis.shape[0] == 3 else np.array([0.0, 0.0, 1.0])
+    normal = normal / np.linalg.norm(normal)
+    if normal[int(np.argmax(np.abs(normal)))] < 0.0:
+        normal = -normal
+    for axis in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        u = axis - float(axis @ normal) * normal
+        if np.linalg.norm(u) > 0.5:
+            break
+    u = u / np.linalg.norm(u)
+    v = np.cross(normal, u)
+    flat = np.stack([centred @ u, centred @ v], axis=1)
+    distance = float(np.abs(centred @ normal).max()) if centred.size else 0.0
+    size = float(np.ptp(points, axis=0).max()) if points.size else 0.0
+    return flat, distance, size
+
+
+def _box(size: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """A closed box centred at the origin: 8 vertices, 12 outward (counter-clockwise) triangles."""
+    half = np.asarray(size, dtype=np.float64) / 2.0
+    corners = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)]) * half
+    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=np.int32)
+    return corners, faces
+
+
+def _glob(pattern: Path) -> list[Path]:
+    anchor = Path(pattern.anchor)
+    relative = str(pattern.relative_to(anchor))
+    return [p for p in anchor.glob(relative) if p.is_file()]
+
+
+def _natural_sorted(paths: list[Path]) -> list[Path]:
+    """Sorted so that ``frame_2`` comes before ``frame_10``."""
+
+    def key(path: Path) -> list[Any]:
+        return [(0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", str(path))]
+
+    return sorted(paths, key=key)
+
+
