@@ -158,18 +158,14 @@ def write_report(results: dict[str, Any], out: Path) -> None:
         lines += broad_phase.report(results["broad_phase"])
     if results.get("simulator"):
         lines += simulator.report_comparison(results["simulator"])
-    if results.get("simulator_stages"):
-        stages_plot = out.parent / "docs" / "bench-sim-stages.png"
-        stages_plot.parent.mkdir(parents=True, exist_ok=True)
-        drawn = simulator.plot_breakdown(results["simulator_stages"], stages_plot)
-        lines += simulator.report_breakdown(results["simulator_stages"],
-                                            stages_plot.relative_to(out.parent).as_posix() if drawn else None)
-    if results.get("paper_scenes"):
-        scenes_plot = out.parent / "docs" / "bench-paper-scenes.png"
-        scenes_plot.parent.mkdir(parents=True, exist_ok=True)
-        drawn = paper_scenes.plot_scenes(results["paper_scenes"], scenes_plot)
-        lines += paper_scenes.report_scenes(results["paper_scenes"],
-                                            scenes_plot.relative_to(out.parent).as_posix() if drawn else None)
+    sections = (("simulator_stages", "bench-sim-stages.png", simulator.plot_breakdown, simulator.report_breakdown),
+                ("paper_scenes", "bench-paper-scenes.png", paper_scenes.plot_scenes, paper_scenes.report_scenes))
+    for key, picture, plot, report in sections:
+        if results.get(key):
+            path = out.parent / "docs" / picture
+            path.parent.mkdir(parents=True, exist_ok=True)
+            drawn = plot(results[key], path)
+            lines += report(results[key], path.relative_to(out.parent).as_posix() if drawn else None)
     out.write_text("\n".join(lines))
 
 

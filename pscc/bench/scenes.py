@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from pscc.bench.simulator import STAGES, _check_mesh, intersection_free, solver_memory
+from pscc.bench.simulator import STAGES, _check_mesh, intersection_free, pyplot, solver_memory, stage_bars
 from pscc.scenes import paper
 from pscc.scenes.registry import DEFAULT_FRAMES
 from pscc.sim.simulation import Simulation
@@ -99,25 +99,15 @@ def run_scenes(device: str, quick: bool = False, names: list[str] | None = None,
 
 def plot_scenes(results: dict[str, Any], path: Path) -> bool:
     """Bar chart of seconds per frame per scene and run kind, stacked by stage; False without matplotlib."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         return False
     rows = [r for r in results["rows"] if r["measured_frames"]]
     if not rows:
         return False
     labels = [f"{r['scene']}\n{r['triangles'] / 1000:.0f}K" for r in rows]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.8 * len(rows)), 4.0))
-    bottom = np.zeros(len(rows))
-    for stage in STAGES:
-        values = np.array([r["stage_seconds"][stage] for r in rows])
-        ax.bar(labels, values, bottom=bottom, label=stage.replace("_", " "))
-        bottom += values
-    other = np.array([max(0.0, r["frame_seconds"] - sum(r["stage_seconds"].values())) for r in rows])
-    ax.bar(labels, other, bottom=bottom, label="other", color="0.8")
+    stage_bars(ax, labels, rows)
     ax.set_ylabel("seconds per frame")
     ax.set_title(f"pscc, paper scenes on {rows[0]['device']}")
     ax.legend(fontsize=7, ncol=2)

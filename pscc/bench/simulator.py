@@ -611,14 +611,33 @@ def report_comparison(results: dict[str, Any]) -> list[str]:
     return lines
 
 
-def plot_breakdown(results: dict[str, Any], path: Path) -> bool:
-    """Stacked bars of seconds per frame per stage (one bar per scene and size); False without matplotlib."""
+def pyplot() -> Any | None:
+    """``matplotlib.pyplot`` with the headless Agg backend, or None when matplotlib is missing."""
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
+        return None
+    return plt
+
+
+def stage_bars(ax: Any, labels: list[str], rows: list[dict[str, Any]]) -> None:
+    """Stacked bars of seconds per frame per stage (``stage_seconds``) and ``other`` on ``ax``."""
+    bottom = np.zeros(len(rows))
+    for stage in STAGES:
+        values = np.array([r["stage_seconds"][stage] for r in rows])
+        ax.bar(labels, values, bottom=bottom, label=STAGE_LABELS[stage])
+        bottom += values
+    other = np.array([max(0.0, r["frame_seconds"] - sum(r["stage_seconds"][k] for k in STAGES)) for r in rows])
+    ax.bar(labels, other, bottom=bottom, label=STAGE_LABELS["other"], color="0.8")
+
+
+def plot_breakdown(results: dict[str, Any], path: Path) -> bool:
+    """Stacked bars of seconds per frame per stage (one bar per scene and size); False without matplotlib."""
+    plt = pyplot()
+    if plt is None:
         return False
     rows = [r for r in results["rows"] if r["measured_frames"]]
     if not rows:

@@ -37,7 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from pscc.errors import InputError
-from pscc.sim.obstacles import Obstacle, Transform, rotation_from_axis_angle
+from pscc.sim.obstacles import (
+    Obstacle,
+    Transform,
+    quaternion_from_rotation_vector,
+    quaternion_matrix,
+    rotation_from_axis_angle,
+    slerp,
+)
 
 RotationTrack = Callable[[float], np.ndarray]
 """A joint's local rotation over time: ``t [s] -> (3, 3)`` rotation matrix."""
@@ -57,34 +64,6 @@ def smoothstep(x: float) -> float:
     """``3 x^2 - 2 x^3`` on [0, 1], clamped outside: 0 -> 0 and 1 -> 1 with zero slope at both ends."""
     x = min(max(float(x), 0.0), 1.0)
     return x * x * (3.0 - 2.0 * x)
-
-
-def _quaternion(rotation_vector: np.ndarray) -> np.ndarray:
-    w = np.asarray(rotation_vector, dtype=np.float64)
-    angle = float(np.linalg.norm(w))
-    if angle < 1e-15:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    return np.concatenate([[math.cos(angle / 2.0)], math.sin(angle / 2.0) * w / angle])
-
-
-def _quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:
-        q = q0 + s * (q1 - q0)
-        return q / np.linalg.norm(q)
-    theta = math.acos(min(dot, 1.0))
-    return (math.sin((1.0 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
 
 
 class EasedMotion:
@@ -118,7 +97,7 @@ class EasedMotion:
             if value.shape != (k, 3) or not np.all(np.isfinite(value)):
                 raise InputError("motion", name, f"shape {value.shape} is not ({k}, 3) finite values",
                                  f"give one finite 3-vector per keyframe ({k})")
-        self._quaternions = [_quaternion(r) for r in self.rotations]
+        self._quaternions = [quaternion_from_rotation_vector(r) for r in self.rotations]
 
     def _segment(self, t: float) -> tuple[int, float]:
         times = self.times
@@ -133,8 +112,8 @@ class EasedMotion:
         """(3, 3) rotation at time ``t`` [s]."""
         i, s = self._segment(float(t))
         if s == 0.0:
-            return _quaternion_matrix(self._quaternions[i])
-        return _quaternion_matrix(_slerp(self._quaternions[i], self._quaternions[i + 1], s))
+            return quaternion_matrix(self._quaternions[i])
+        return quaternion_matrix(slerp(self._quaternions[i], self._quaternions[i + 1], s))
 
     def translation(self, t: float) -> np.ndarray:
         """(3,) translation at time ``t`` [s]."""

@@ -32,7 +32,8 @@ def rotation_from_axis_angle(rotation_vector: np.ndarray) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
 
 
-def _quaternion(rotation_vector: np.ndarray) -> np.ndarray:
+def quaternion_from_rotation_vector(rotation_vector: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation vector (axis times angle [rad])."""
     w = np.asarray(rotation_vector, dtype=np.float64)
     angle = float(np.linalg.norm(w))
     if angle < 1e-15:
@@ -40,7 +41,8 @@ def _quaternion(rotation_vector: np.ndarray) -> np.ndarray:
     return np.concatenate([[math.cos(angle / 2.0)], math.sin(angle / 2.0) * w / angle])
 
 
-def _quaternion_matrix(q: np.ndarray) -> np.ndarray:
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion (w, x, y, z), normalised first."""
     w, x, y, z = q / np.linalg.norm(q)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -49,14 +51,15 @@ def _quaternion_matrix(q: np.ndarray) -> np.ndarray:
     ])
 
 
-def _slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions at s in [0, 1] (the shorter arc)."""
     dot = float(np.dot(q0, q1))
     if dot < 0.0:
         q1, dot = -q1, -dot
     if dot > 0.9995:
         q = q0 + s * (q1 - q0)
         return q / np.linalg.norm(q)
-    theta = math.acos(dot)
+    theta = math.acos(min(dot, 1.0))
     return (math.sin((1.0 - s) * theta) * q0 + math.sin(s * theta) * q1) / math.sin(theta)
 
 
@@ -103,8 +106,9 @@ class KeyframedMotion:
         i = int(np.searchsorted(times, t, side="right")) - 1
         s = (t - times[i]) / (times[i + 1] - times[i])
         c = (1.0 - s) * self.translations[i] + s * self.translations[i + 1]
-        q = _slerp(_quaternion(self.rotations[i]), _quaternion(self.rotations[i + 1]), s)
-        return _quaternion_matrix(q), c
+        q = slerp(quaternion_from_rotation_vector(self.rotations[i]),
+                  quaternion_from_rotation_vector(self.rotations[i + 1]), s)
+        return quaternion_matrix(q), c
 
 
 def static_motion(t: float) -> Transform:
