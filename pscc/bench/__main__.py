@@ -38,6 +38,7 @@ from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
 from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
 from pscc.mesh.generate import folded_sheet
+from pscc.scenes.paper import PAPER_SCENES
 
 
 def _median_seconds(run: Any, repeats: int) -> float:
@@ -240,12 +241,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-newton", action="store_true",
                         help="skip Newton in the broad-phase and the simulator comparisons")
     parser.add_argument("--simulator", choices=("full", "quick", "skip"), default="full",
-                        help="cloth simulator against Newton VBD: full (about 9 min on 2 CPU cores), quick (1 min) "
+                        help="cloth simulator against Newton VBD: full (about 5 min on 2 CPU cores), quick (1 min) "
                         "or skip")
     parser.add_argument("--simulator-cases", nargs="+", default=None, metavar="SCENE:TRIANGLES:FRAMES",
                         help="override the simulator comparison's cases (e.g. drape:2000:15 twist:2000:45)")
     parser.add_argument("--stages", choices=("full", "quick", "skip"), default="full",
-                        help="cloth simulator seconds per stage and memory: full (10K and 50K, about 6 min on 2 CPU "
+                        help="cloth simulator seconds per stage and memory: full (10K and 50K, about 2 min on 2 CPU "
                         "cores), quick (2K, 10 s) or skip")
     parser.add_argument("--stage-sizes", type=int, nargs="+", default=None,
                         help="override the cloth triangle counts of the per-stage breakdown")
@@ -253,8 +254,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="override the measured frames (after the warm-up) of the per-stage breakdown")
     parser.add_argument("--scenes", choices=("full", "quick", "skip"), default="full",
                         help="the paper's scenes, seconds per frame and memory: full (whole animations at about 5K "
-                        "triangles and 4 frames at 20K, about 15 min on 2 CPU cores), quick (2 frames each) or skip")
-    parser.add_argument("--scene-names", nargs="+", default=None, metavar="SCENE",
+                        "triangles and 4 frames at 20K, about 4 min on 2 CPU cores), quick (2 frames each) or skip")
+    parser.add_argument("--scene-names", nargs="+", default=None, metavar="SCENE", choices=sorted(PAPER_SCENES),
                         help="only these paper scenes in the scenes section")
     parser.add_argument("--only-simulator", action="store_true",
                         help="run only the simulator sections (5 and 6); the report then holds only them")
