@@ -12,8 +12,12 @@ kernel                                one thread per
 ``_fill_entries``                     face: its (key, face) entries, one per overlapped cell
 ``_mark_runs``                        sorted entry: head flags of groups and of cells
 ``_write_tables``                     sorted entry: group ranges, group cell, cell ends
-``_compute_row_work``                 group: BV tests of its row (its members x later groups)
-``_gather_table_info``                (single thread) groups, cells, BV tests for the host
+``_compute_group_slabs``              group (group slab test only): its axis and slab
+``_plan_rows``                        group: slab tests against later groups of its cell, its rows
+                                      (runs of later groups that pass) and their BV tests
+``_gather_table_info``                (single thread) rows, face tests, group tests for the host
+``_write_rows``                       group: its rows (a-range = the group, b-range = a run of
+                                      later groups of its cell) and the BV tests of each
 ``_test_bounding_volumes``            BV test (a batch of the global test index range)
 ``_compute_pair_keys``                emitted pair: its sort key a * face_count + b
 ====================================  ==============================================================
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from pscc import tolerances
 from pscc.geometry.aabb import boxes_overlap
 
 wp.set_module_options({"enable_backward": False})
@@ -30,7 +35,13 @@ wp.set_module_options({"enable_backward": False})
 NODE_BITS: int = 32
 """Low bits of an entry key that hold the node id (its uint32 bit pattern); the cell id sits above."""
 
+MASK_BITS: int = 64
+"""Later groups of a cell whose slab test result a group keeps (bits of ``group_mask``); later
+groups past these are always tested face by face (conservative)."""
+
 _NODE_SHIFT = wp.constant(wp.int64(NODE_BITS))
+_MASK_BITS = wp.constant(MASK_BITS)
+_SLAB_PAD = wp.constant(float(tolerances.GROUP_SLAB_RELATIVE_PAD))
 _NODE_MASK = wp.constant(wp.int64((1 << NODE_BITS) - 1))
 
 
@@ -45,17 +56,32 @@ class GridArgs:
 
 @wp.struct
 class TableArgs:
-    """The sorted entries and the two tables built from them (layout in ``SpatialHash``)."""
+    """The sorted entries, the two tables built from them and the work rows (layout in ``SpatialHash``)."""
 
     entry_key: wp.array(dtype=wp.int64)
     entry_face: wp.array(dtype=wp.int32)
     group_start: wp.array(dtype=wp.int32)
     group_end: wp.array(dtype=wp.int32)
-    group_cell: wp.array(dtype=wp.int32)
-    cell_end: wp.array(dtype=wp.int32)
+    row_span: wp.array(dtype=wp.vec3i)
     row_work: wp.array(dtype=wp.int64)
     row_scan: wp.array(dtype=wp.int64)
-    group_count: int
+    row_count: int
+
+
+@wp.struct
+class SlabArgs:
+    """Face geometry of the group slab test (``enabled`` = 0: every group pair is tested face by face).
+
+    ``positions_t1`` is read only when ``swept`` != 0 (CCD: the slab holds both ends of the step).
+    """
+
+    enabled: int
+    faces: wp.array(dtype=wp.vec3i)
+    positions_t0: wp.array(dtype=wp.vec3)
+    positions_t1: wp.array(dtype=wp.vec3)
+    swept: int
+    half_distance: float
+    min_work: wp.int64
 
 
 @wp.func
@@ -263,28 +289,173 @@ def _write_tables(
         cell_end[c] = i + 1
 
 
+@wp.func
+def _project_group(
+    entry_face: wp.array(dtype=wp.int32), start: int, end: int, axis: wp.vec3, slab: SlabArgs
+) -> wp.vec3:
+    """(min, max) of axis . p over the vertices p of the faces of entries [start, end) at both ends of
+    the step (t0 only when not swept), and the largest |p|_1 (for the rounding bound)."""
+    lo = float(wp.inf)
+    hi = float(-wp.inf)
+    size = float(0.0)
+    for e in range(start, end):
+        tri = slab.faces[entry_face[e]]
+        for v in range(3):
+            p = slab.positions_t0[tri[v]]
+            s = wp.dot(axis, p)
+            lo = wp.min(lo, s)
+            hi = wp.max(hi, s)
+            size = wp.max(size, wp.abs(p[0]) + wp.abs(p[1]) + wp.abs(p[2]))
+            if slab.swept != 0:
+                q = slab.positions_t1[tri[v]]
+                s = wp.dot(axis, q)
+                lo = wp.min(lo, s)
+                hi = wp.max(hi, s)
+                size = wp.max(size, wp.abs(q[0]) + wp.abs(q[1]) + wp.abs(q[2]))
+    return wp.vec3(lo, hi, size)
+
+
+@wp.func
+def _slab_margin(size: float, half_distance: float) -> float:
+    """Growth of a slab end: the half distance plus the rounding bound of GROUP_SLAB_RELATIVE_PAD."""
+    return half_distance * (1.0 + _SLAB_PAD) + _SLAB_PAD * (size + half_distance)
+
+
 @wp.kernel
-def _compute_row_work(
+def _compute_group_slabs(
     # in:
-    group_rank: wp.array(dtype=wp.int32),
+    entry_face: wp.array(dtype=wp.int32),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    slab: SlabArgs,
+    # out:
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec3),
+):
+    """One thread per group: axis = normalised sum of its faces' unit normals at mid-step (any axis
+    is valid; this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
+    A zero axis (normals that cancel, degenerate faces) marks a group that is never culled."""
+    g = wp.tid()
+    start = group_start[g]
+    end = group_end[g]
+    total = wp.vec3(0.0, 0.0, 0.0)
+    for e in range(start, end):
+        tri = slab.faces[entry_face[e]]
+        a = slab.positions_t0[tri[0]]
+        b = slab.positions_t0[tri[1]]
+        c = slab.positions_t0[tri[2]]
+        if slab.swept != 0:
+            a = 0.5 * (a + slab.positions_t1[tri[0]])
+            b = 0.5 * (b + slab.positions_t1[tri[1]])
+            c = 0.5 * (c + slab.positions_t1[tri[2]])
+        n = wp.cross(b - a, c - a)
+        length = wp.length(n)
+        if length > 0.0:
+            total += n / length
+    length = wp.length(total)
+    axis = wp.vec3(0.0, 0.0, 0.0)
+    if length > 1.0e-3:
+        axis = total / length
+    group_axis[g] = axis
+    group_slab[g] = _project_group(entry_face, start, end, axis, slab)
+
+
+@wp.func
+def _slab_pair_passes(
+    entry_face: wp.array(dtype=wp.int32),
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec3),
+    g: int,
+    g_start: int,
+    g_end: int,
+    h: int,
+    h_start: int,
+    h_end: int,
+    slab: SlabArgs,
+) -> bool:
+    """False when the faces of groups g and h are provably farther apart than twice the half distance:
+    the smaller group projected on the larger group's axis misses that group's slab."""
+    owner = g
+    other_start = h_start
+    other_end = h_end
+    if h_end - h_start > g_end - g_start:
+        owner = h
+        other_start = g_start
+        other_end = g_end
+    axis = group_axis[owner]
+    if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
+        return True
+    own = group_slab[owner]
+    other = _project_group(entry_face, other_start, other_end, axis, slab)
+    own_margin = _slab_margin(own[2], slab.half_distance)
+    other_margin = _slab_margin(other[2], slab.half_distance)
+    if other[0] - other_margin > own[1] + own_margin:
+        return False
+    if own[0] - own_margin > other[1] + other_margin:
+        return False
+    return True
+
+
+@wp.kernel
+def _plan_rows(
+    # in:
+    group_count: int,
+    entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec3),
+    slab: SlabArgs,
     # out:
-    row_work: wp.array(dtype=wp.int64),
+    group_mask: wp.array(dtype=wp.uint64),
+    row_count: wp.array(dtype=wp.int32),
+    work_counts: wp.array(dtype=wp.int64),
 ):
-    """One thread per group (slots past the group count, if launched, get 0).
-
-    Row g holds the tests of every member of group g against every entry of the later groups of
-    the same cell: n_g x (cell_end - group_end[g]). Summed over a cell: sum_{i<j} n_i n_j.
-    """
+    """One thread per group g: walks the later groups of its cell (the rest of the workLoadHashTable
+    row), slab-tests the first MASK_BITS of them whose face tests would number at least
+    ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts its rows (maximal runs
+    of later groups that pass), its face tests (work_counts[0]) and its slab tests (work_counts[1])."""
     g = wp.tid()
-    if g >= group_rank[group_rank.shape[0] - 1]:
-        row_work[g] = wp.int64(0)
+    if g >= group_count:
         return
-    rest = cell_end[group_cell[g]] - group_end[g]
-    row_work[g] = wp.int64(group_end[g] - group_start[g]) * wp.int64(rest)
+    start = group_start[g]
+    end = group_end[g]
+    n_g = wp.int64(end - start)
+    stop = cell_end[group_cell[g]]
+    mask = wp.uint64(0)
+    runs = int(0)
+    in_run = bool(False)
+    work = wp.int64(0)
+    slab_tests = wp.int64(0)
+    h = g + 1
+    t = int(0)
+    b = end
+    while b < stop:
+        h_end = group_end[h]
+        passed = bool(True)
+        if slab.enabled != 0 and t < _MASK_BITS:
+            if n_g * wp.int64(h_end - b) >= slab.min_work:
+                slab_tests += wp.int64(1)
+                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab)
+            if passed:
+                mask = mask | (wp.uint64(1) << wp.uint64(t))
+        if passed:
+            work += n_g * wp.int64(h_end - b)
+            if not in_run:
+                runs += 1
+        in_run = passed
+        b = h_end
+        h += 1
+        t += 1
+    if slab.enabled != 0:
+        group_mask[g] = mask
+    row_count[g] = runs
+    if work > wp.int64(0):
+        wp.atomic_add(work_counts, 0, work)
+    if slab_tests > wp.int64(0):
+        wp.atomic_add(work_counts, 1, slab_tests)
 
 
 @wp.kernel
@@ -292,22 +463,86 @@ def _gather_table_info(
     # in:
     group_rank: wp.array(dtype=wp.int32),
     cell_rank: wp.array(dtype=wp.int32),
-    row_scan: wp.array(dtype=wp.int64),
     # out:
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: [groups, cells, BV tests] in one array, so the host reads it at once."""
+    """A single thread: [groups, cells] of the last sorted entry (before the rank arrays are reused)."""
     last = group_rank.shape[0] - 1
     info[0] = wp.int64(group_rank[last])
     info[1] = wp.int64(cell_rank[last])
-    info[2] = row_scan[row_scan.shape[0] - 1]
+
+
+@wp.kernel
+def _gather_row_info(
+    # in:
+    row_end: wp.array(dtype=wp.int32),
+    work_counts: wp.array(dtype=wp.int64),
+    # out:
+    info: wp.array(dtype=wp.int64),
+):
+    """A single thread: info[2:5] = [rows, face tests, slab tests], next to [groups, cells], so the
+    host reads all five at once."""
+    info[2] = wp.int64(row_end[row_end.shape[0] - 1])
+    info[3] = work_counts[0]
+    info[4] = work_counts[1]
+
+
+@wp.kernel
+def _write_rows(
+    # in:
+    group_count: int,
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    group_mask: wp.array(dtype=wp.uint64),
+    slab_enabled: int,
+    row_count: wp.array(dtype=wp.int32),
+    row_end: wp.array(dtype=wp.int32),
+    # out:
+    row_span: wp.array(dtype=wp.vec3i),
+    row_work: wp.array(dtype=wp.int64),
+):
+    """One thread per group g: the same walk as ``_plan_rows``, writing each run of passing later
+    groups as the row (g, b_start, b_end) with its BV tests n_g x (b_end - b_start)."""
+    g = wp.tid()
+    if g >= group_count:
+        return
+    slot = row_end[g] - row_count[g]
+    n_g = wp.int64(group_end[g] - group_start[g])
+    stop = cell_end[group_cell[g]]
+    mask = wp.uint64(0)
+    if slab_enabled != 0:
+        mask = group_mask[g]
+    h = g + 1
+    t = int(0)
+    b = group_end[g]
+    run_start = int(-1)
+    while b < stop:
+        h_end = group_end[h]
+        passed = bool(True)
+        if slab_enabled != 0 and t < _MASK_BITS:
+            passed = ((mask >> wp.uint64(t)) & wp.uint64(1)) != wp.uint64(0)
+        if passed and run_start < 0:
+            run_start = b
+        if not passed and run_start >= 0:
+            row_span[slot] = wp.vec3i(g, run_start, b)
+            row_work[slot] = n_g * wp.int64(b - run_start)
+            slot += 1
+            run_start = -1
+        b = h_end
+        h += 1
+        t += 1
+    if run_start >= 0:
+        row_span[slot] = wp.vec3i(g, run_start, stop)
+        row_work[slot] = n_g * wp.int64(stop - run_start)
 
 
 @wp.func
-def _find_row(row_scan: wp.array(dtype=wp.int64), group_count: int, k: wp.int64) -> int:
-    """First group g with row_scan[g] > k (row_scan is the inclusive scan of the row work)."""
+def _find_row(row_scan: wp.array(dtype=wp.int64), row_count: int, k: wp.int64) -> int:
+    """First row r with row_scan[r] > k (row_scan is the inclusive scan of the row work)."""
     lo = int(0)
-    hi = group_count - 1
+    hi = row_count - 1
     while lo < hi:
         mid = (lo + hi) // 2
         if row_scan[mid] > k:
@@ -336,32 +571,35 @@ def _test_bounding_volumes(
 ):
     """The paper's DecodePairsAndTest: thread tid runs BV tests first_test + tid x tests_per_thread
     onwards, ``tests_per_thread`` of them (1 = one thread per BV test). Every thread gets the same
-    amount of work; consecutive tests walk along the rows of the workload table, so a batch needs
-    one binary search."""
+    amount of work; consecutive tests walk along the work rows, so a batch needs one binary search.
+
+    Row r = (g, b_start, b_end) holds the tests of every entry of group g against the entries
+    [b_start, b_end) (later groups of the same cell); every row has at least one test."""
     # Arrays out of the struct once: on the CPU every struct member access copies the array header.
     entry_face = tables.entry_face
     entry_key = tables.entry_key
     group_starts = tables.group_start
     group_ends = tables.group_end
-    group_cell = tables.group_cell
-    cell_ends = tables.cell_end
+    row_span = tables.row_span
     row_work = tables.row_work
     row_scan = tables.row_scan
     k = first_test + wp.int64(wp.tid()) * wp.int64(tests_per_thread)
     if k >= end_test:
         return
-    g = _find_row(row_scan, tables.group_count, k)
-    q = k - (row_scan[g] - row_work[g])
-    # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row g at
-    # offset q is entry a = group_start + q / rest against entry b = group_end + q % rest; the walk
+    r = _find_row(row_scan, tables.row_count, k)
+    q = k - (row_scan[r] - row_work[r])
+    # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row r at
+    # offset q is entry a = group_start + q / rest against entry b = b_start + q % rest; the walk
     # keeps both indices and divides only once per thread.
-    rest = wp.int64(cell_ends[group_cell[g]] - group_ends[g])
+    span = row_span[r]
+    g = span[0]
+    b_start = span[1]
+    b_end = span[2]
+    rest = wp.int64(b_end - b_start)
     entry_a = group_starts[g] + int(q // rest)
-    entry_b = group_ends[g] + int(q % rest)
+    entry_b = b_start + int(q % rest)
     row_key = entry_key[group_starts[g]]
     row_cell = key_cell(row_key)
-    group_end = group_ends[g]
-    cell_end = cell_ends[group_cell[g]]
     last_a = group_ends[g]
     fa = entry_face[entry_a]
     lower_a = face_lower[fa]
@@ -396,21 +634,20 @@ def _test_bounding_volumes(
                     pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
         k += wp.int64(1)
         entry_b += 1
-        if entry_b == cell_end:
-            entry_b = group_end
+        if entry_b == b_end:
+            entry_b = b_start
             entry_a += 1
             if entry_a == last_a:
-                # Next row with work (rows of groups that are last in their cell have none).
                 if k >= end_test:
                     break
-                g += 1
-                while g < tables.group_count - 1 and row_work[g] == wp.int64(0):
-                    g += 1
+                r += 1
+                span = row_span[r]
+                g = span[0]
+                b_start = span[1]
+                b_end = span[2]
                 entry_a = group_starts[g]
-                group_end = group_ends[g]
-                last_a = group_end
-                entry_b = group_end
-                cell_end = cell_ends[group_cell[g]]
+                entry_b = b_start
+                last_a = group_ends[g]
                 row_key = entry_key[entry_a]
                 row_cell = key_cell(row_key)
             fa = entry_face[entry_a]

@@ -153,7 +153,8 @@ class CollisionDetector:
             self.brute_force = BroadPhaseBruteForce(self.boxes, self._vertex_used, device)
             return
         # The detector sorts its final rows, so the hash's own pair sort is not needed.
-        self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False)
+        self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False,
+                                        faces=self._faces, group_slab_test=self.method == "pscc")
         self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
@@ -262,19 +263,20 @@ class CollisionDetector:
                          inter_triangle_pairs=m * (m - 1) // 2 - self_pairs)
         else:
             node_id = None
+            x1_device = self._positions_t1 if x1 is not None else None
             if self.method == "pscc":
                 mark = time.perf_counter()
-                x1_device = self._positions_t1 if x1 is not None else None
                 node_id = self.front.update(self._positions_t0, x1_device)
                 wp.synchronize_device(self.device)
                 seconds["front"] = time.perf_counter() - mark
                 stats["front_size"] = self.front.front_size
                 stats["front"] = dict(self.front.stats)
             mark = time.perf_counter()
-            pairs, box_pairs = self.spatial_hash.find_pairs(self.boxes.face_lower, self.boxes.face_upper, node_id)
+            pairs, box_pairs = self.spatial_hash.find_pairs(
+                self.boxes.face_lower, self.boxes.face_upper, node_id,
+                positions_t0=self._positions_t0, positions_t1=x1_device, half_distance=0.5 * h)
             seconds["spatial_hash"] = time.perf_counter() - mark
             mark = time.perf_counter()
-            x1_device = self._positions_t1 if x1 is not None else None
             self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
                                        self._object_ids, self._feature_boxes)
             count = self.feature_pairs.kept_pairs
@@ -285,6 +287,7 @@ class CollisionDetector:
                          self_triangle_pairs=self_pairs, inter_triangle_pairs=int(count) - self_pairs,
                          grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
+                               "face_tests": int(hash_stats.face_tests), "slab_tests": int(hash_stats.slab_tests),
                                "mean_cells_per_face": float(hash_stats.mean_cells_per_face)})
         stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
         stats["seconds"] = seconds

@@ -8,8 +8,13 @@ Each face box is inserted in every grid cell it overlaps, keyed by the exact 64-
   of the key, so the groups of a cell are adjacent after the sort).
 
 Faces of one group are never paired (same normal-cone-test-front node: the self-collision culling).
-Every other pair of entries of a cell is one bounding-volume (BV) test, run by one thread; a
-token-position rule emits each overlapping face pair from exactly one cell. See
+With the *group slab test* on (PSCC), two groups of a cell are first tested as wholes: the faces of
+the smaller group, projected on the larger group's axis (the mean normal of its faces, so a flat
+front node gives a thin slab), must reach that group's slab, both grown by the half distance and a
+rounding bound. Groups that miss each other hold no pair of faces closer than the distance, so their
+face pairs are skipped. Every remaining pair of entries of a cell is one bounding-volume (BV) test,
+run by one thread, found through *work rows* (a group against a run of later groups of its cell);
+a token-position rule emits each overlapping face pair from exactly one cell. See
 ``docs/spatial-hash.md`` for the derivations.
 
 Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, all <= entry capacity):
@@ -25,16 +30,24 @@ group_start / group_end    (E,) / (G,) int32     entry range of group g (triangl
                                                  group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
-row_work / row_scan        (G,) int64            BV tests of row g = n_g x entries of later groups of its
-                                                 cell / inclusive scan (searched by the test threads)
+group_axis / group_slab    (G,) vec3 / vec3      slab test only: axis of group g / (min, max) of its faces
+                                                 on the axis and their largest |p|_1 (1 slot when off)
+group_mask                 (G,) uint64           slab test only: bit t = the t-th later group of the cell
+                                                 passed (or was not tested)
+row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
+row_span                   (R,) vec3i            work row r = (g, b_start, b_end): entries of group g
+                                                 against entries [b_start, b_end) of its cell
+row_work / row_scan        (R,) int64            BV tests of row r = n_g x (b_end - b_start) / inclusive
+                                                 scan (searched by the test threads)
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
                                                  (P slots and no keys when ``sort_pairs`` is off)
 counts                     (2,) int64            [pairs emitted, same-node tests (always 0)]
+work_counts                (2,) int64            [face tests, slab tests] of the planned rows
 =========================  ====================  ===========================================================
 
 Sync points of :meth:`SpatialHash.find_pairs` (host reads of device data, each a few scalars):
-(1) scene bounds and mean box size, (2) entry count and grid size, (3) group, cell and BV test
-counts, (4) emitted pair count. Everything else stays on the device.
+(1) scene bounds and mean box size, (2) entry count and grid size, (3) group count, (4) cell, row,
+face-test and slab-test counts, (5) emitted pair count. Everything else stays on the device.
 """
 
 from __future__ import annotations
@@ -65,6 +78,10 @@ MAX_ENTRIES: int = 2**30 - 1
 MAX_PAIRS: int = 2**30 - 1
 """Most emitted face pairs: the pair buffer is int32-indexed and the radix sort needs 2 P slots."""
 
+DEFAULT_SLAB_MIN_WORK: int = 8
+"""Two groups are slab-tested only when they would need at least this many face tests (n_g n_h):
+a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face."""
+
 DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
 """Grid guard: when the entries exceed this many per face, the cell size is doubled and the
 faces are counted again (pairs are unchanged, only culling gets coarser)."""
@@ -86,7 +103,11 @@ class SpatialHashStats:
         entries: face-cell insertions E.
         groups: distinct {cell, node} keys (triangleHashTable rows).
         cells: non-empty cells (workLoadHashTable rows).
-        bv_tests: box tests run, T = sum over cells of sum_{i<j} n_i n_j.
+        bv_tests: bounding-volume tests run: ``face_tests + slab_tests``.
+        face_tests: face box tests run: sum over cells of sum_{i<j} n_i n_j over the group pairs
+            that are not culled by a slab test (all of them when the slab test is off).
+        slab_tests: group slab tests run (0 when the slab test is off).
+        rows: work rows (a group against a run of later groups of its cell).
         triangle_pairs: face pairs emitted (unique, a < b).
         mean_cells_per_face: E / face_count.
         coarsenings: times the cell size was doubled by the grid guard.
@@ -101,6 +122,9 @@ class SpatialHashStats:
     groups: int = 0
     cells: int = 0
     bv_tests: int = 0
+    face_tests: int = 0
+    slab_tests: int = 0
+    rows: int = 0
     triangle_pairs: int = 0
     mean_cells_per_face: float = 0.0
     coarsenings: int = 0
@@ -146,6 +170,12 @@ class SpatialHash:
         sort_pairs: sort the emitted pairs by (a, b) (deterministic order on every device). Without
             sorting, the order follows the atomic appends (deterministic on the CPU only) and the
             pair buffer needs half the memory; the detector sorts its final results anyway.
+        group_slab_test: test two groups of a cell as wholes before their face pairs (needs
+            ``faces``, and positions on every :meth:`find_pairs` call that passes node ids). The
+            pairs are then those whose boxes overlap, whose node ids differ and whose groups are not
+            separated along a group axis: a superset of the pairs closer than twice the half
+            distance, a subset of the box pairs.
+        slab_min_work: slab-test two groups only when they would need this many face tests.
 
     Raises:
         InputError: invalid arguments.
@@ -164,8 +194,15 @@ class SpatialHash:
         tests_per_launch: int = TESTS_PER_LAUNCH,
         sort_pairs: bool = True,
         tests_per_thread: int | None = None,
+        group_slab_test: bool = False,
+        slab_min_work: int = DEFAULT_SLAB_MIN_WORK,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
+        self.group_slab_test = bool(group_slab_test)
+        if isinstance(slab_min_work, bool) or not isinstance(slab_min_work, int | np.integer) or slab_min_work < 1:
+            raise InputError("argument", "slab_min_work", f"{slab_min_work!r} is not an integer >= 1",
+                             "pass a positive integer such as 8")
+        self.slab_min_work = int(slab_min_work)
         if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
             raise InputError("argument", "face_count", f"{face_count!r} is not an integer >= 0",
                              "pass the number of faces")
@@ -198,9 +235,10 @@ class SpatialHash:
         if faces is not None:
             self._check_array(faces, "faces", wp.vec3i)
             self.faces = faces
-        elif self.skip_adjacent:
-            raise InputError("argument", "faces", "skip_adjacent=True needs the faces' vertex ids",
-                             "pass faces=(face_count,) wp.vec3i or leave skip_adjacent False")
+        elif self.skip_adjacent or self.group_slab_test:
+            option = "skip_adjacent" if self.skip_adjacent else "group_slab_test"
+            raise InputError("argument", "faces", f"{option}=True needs the faces' vertex ids",
+                             f"pass faces=(face_count,) wp.vec3i or leave {option} False")
         else:
             self.faces = wp.zeros(1, dtype=wp.vec3i, device=self.device)
 
@@ -217,12 +255,14 @@ class SpatialHash:
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.grid_max = wp.zeros(3, dtype=wp.int32, device=dev)
         self.entry_info = wp.zeros(4, dtype=wp.int64, device=dev)
-        self.table_info = wp.zeros(3, dtype=wp.int64, device=dev)
+        self.table_info = wp.zeros(5, dtype=wp.int64, device=dev)
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
+        self.work_counts = wp.zeros(2, dtype=wp.int64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
         self._allocate_entries(max(1, 4 * m))
         capacity = 4 * m if pair_capacity is None else pair_capacity
         self._allocate_pairs(max(1, min(MAX_PAIRS, capacity)))
+        self._allocate_rows(max(1, m // 4))
         self._pair_count = 0
         self.stats = SpatialHashStats()
 
@@ -247,6 +287,16 @@ class SpatialHash:
         self.group_capacity = capacity
         self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
+        slab_capacity = capacity if self.group_slab_test else 1
+        self.group_axis = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
+        self.group_slab = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
+        self.group_mask = wp.empty(slab_capacity, dtype=wp.uint64, device=dev)
+
+    def _allocate_rows(self, capacity: int) -> None:
+        """Work rows, sized by the row count (at most the group count without the slab test)."""
+        dev = self.device
+        self.row_capacity = capacity
+        self.row_span = wp.empty(capacity, dtype=wp.vec3i, device=dev)
         self.row_work = wp.empty(capacity, dtype=wp.int64, device=dev)
         self.row_scan = wp.empty(capacity, dtype=wp.int64, device=dev)
 
@@ -261,9 +311,10 @@ class SpatialHash:
     def device_bytes(self) -> dict[str, int]:
         """Bytes held on the device, per buffer name."""
         names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "face_cells",
-                 "face_end", "grid_max", "entry_info", "table_info", "counts", "own_node_id", "faces",
-                 "entry_key", "entry_face", "group_rank", "cell_rank", "group_start", "cell_end",
-                 "group_end", "group_cell", "row_work", "row_scan", "pairs", "pair_keys")
+                 "face_end", "grid_max", "entry_info", "table_info", "counts", "work_counts", "own_node_id",
+                 "faces", "entry_key", "entry_face", "group_rank", "cell_rank", "group_start", "cell_end",
+                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "row_span", "row_work",
+                 "row_scan", "pairs", "pair_keys")
         return {name: int(getattr(self, name).capacity) for name in names}
 
     # ------------------------------------------------------------------ validation
@@ -290,10 +341,16 @@ class SpatialHash:
         face_upper: wp.array,
         node_id: wp.array | None = None,
         cell_size: float | None = None,
+        *,
+        positions_t0: wp.array | None = None,
+        positions_t1: wp.array | None = None,
+        half_distance: float = 0.0,
     ) -> tuple[wp.array, int]:
-        """All face pairs (a < b) whose closed boxes overlap and whose node ids differ.
+        """All face pairs (a < b) whose closed boxes overlap and whose node ids differ (with the
+        group slab test: less the pairs of groups separated along a group axis, none of which is
+        closer than twice ``half_distance``).
 
-        Sync points: four host reads of a few scalars each (module docstring); the buffers grow
+        Sync points: five host reads of a few scalars each (module docstring); the buffers grow
         when an exact count exceeds their capacity, and the test pass then re-runs.
 
         Args:
@@ -303,6 +360,11 @@ class SpatialHash:
                 paired; any int32 value); ``None`` gives every face its own node.
             cell_size: grid cell edge (length units); ``None`` uses ``cell_size_factor`` x the
                 mean box axis length.
+            positions_t0: (vertex_count,) ``wp.vec3`` vertex positions at the start of the step, the
+                ones the boxes were built from; needed by the group slab test when ``node_id`` is
+                given (without node ids every group is one face and no group is slab-tested).
+            positions_t1: positions at the end of the step (CCD; ``None``: discrete).
+            half_distance: the half distance the boxes were grown by (length units, >= 0).
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
@@ -322,6 +384,7 @@ class SpatialHash:
             self._check_array(node_id, "node_id", wp.int32)
         if cell_size is not None:
             cell_size = _check_positive(cell_size, "cell_size")
+        slab = self._slab_args(node_id is not self.own_node_id, positions_t0, positions_t1, half_distance)
         self.stats = SpatialHashStats()
         self._pair_count = 0
         if self.face_count < 2:
@@ -339,13 +402,51 @@ class SpatialHash:
         grid = kernels.GridArgs()
         grid.origin = wp.vec3(*origin)
         entries = self._insert_faces(face_lower, face_upper, node_id, grid, cell_size, extent)
-        self._build_tables(entries)
+        self._build_tables(entries, slab)
         self._test_pairs(face_lower, face_upper, grid)
         if self.sort_pairs:
             self._sort_pairs()
         self.stats.mean_cells_per_face = entries / self.face_count
         self.stats.device_bytes = self.device_bytes
         return self.pairs[: self._pair_count], self._pair_count
+
+    def _slab_args(self, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
+                   half_distance: float) -> kernels.SlabArgs:
+        """The slab test's launch arguments (disabled unless configured and given node ids)."""
+        slab = kernels.SlabArgs()
+        slab.enabled = 0
+        slab.faces = self.faces
+        slab.swept = 0
+        slab.half_distance = 0.0
+        slab.min_work = self.slab_min_work
+        if not (self.group_slab_test and grouped):
+            slab.positions_t0 = slab.positions_t1 = self.chunk_lower
+            return slab
+        for name, value in (("positions_t0", positions_t0), ("positions_t1", positions_t1)):
+            if value is None:
+                if name == "positions_t0":
+                    raise InputError("argument", name, "the group slab test needs the vertex positions",
+                                     "pass positions_t0 (and positions_t1 for CCD) with node_id")
+                continue
+            if not isinstance(value, wp.array) or value.dtype != wp.vec3 or value.ndim != 1:
+                raise InputError("argument", name, f"got {type(value).__name__}, not a 1-D wp.array of vec3",
+                                 "pass the (vertex_count,) wp.vec3 positions the boxes were built from")
+            if value.device != self.device:
+                raise InputError("argument", name, f"array is on {value.device}, the hash on {self.device}",
+                                 f"copy it to {self.device} first")
+        if positions_t1 is not None and positions_t1.shape != positions_t0.shape:
+            raise InputError("argument", "positions_t1", f"shape {positions_t1.shape} != positions_t0's "
+                             f"{positions_t0.shape}", "pass both ends of the step for the same vertices")
+        half = float(half_distance)
+        if not math.isfinite(half) or half < 0.0:
+            raise InputError("argument", "half_distance", f"{half_distance!r} is not a finite number >= 0",
+                             "pass the half distance the boxes were grown by")
+        slab.enabled = 1
+        slab.positions_t0 = positions_t0
+        slab.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
+        slab.swept = 0 if positions_t1 is None else 1
+        slab.half_distance = half
+        return slab
 
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b).
@@ -423,8 +524,9 @@ class SpatialHash:
         wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, 0, kernels.NODE_BITS + cell_bits)
         return entries
 
-    def _build_tables(self, entries: int) -> None:
-        """Run heads -> ranks -> group and cell ranges -> row work and its scan. Sync point 3."""
+    def _build_tables(self, entries: int, slab: kernels.SlabArgs) -> None:
+        """Run heads -> ranks -> group and cell ranges -> slab tests and work rows -> row scan.
+        Sync points 3 (group count) and 4 (cells, rows, face tests, slab tests)."""
         dev = self.device
         n = entries
         keys = self.entry_key[:n]
@@ -437,31 +539,53 @@ class SpatialHash:
             self._allocate_groups(int(groups * _GROWTH) + 1)
         wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n]],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
-        wp.launch(kernels._compute_row_work, dim=groups,
-                  inputs=[self.group_rank[:n], self.group_start, self.group_end, self.group_cell, self.cell_end],
-                  outputs=[self.row_work], device=dev)
-        wp.utils.array_scan(self.row_work[:groups], self.row_scan[:groups], inclusive=True)
-        wp.launch(kernels._gather_table_info, dim=1,
-                  inputs=[self.group_rank[:n], self.cell_rank[:n], self.row_scan[:groups]],
+        wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank[:n], self.cell_rank[:n]],
                   outputs=[self.table_info], device=dev)
+        if slab.enabled:
+            wp.launch(kernels._compute_group_slabs, dim=groups,
+                      inputs=[self.entry_face, self.group_start, self.group_end, slab],
+                      outputs=[self.group_axis, self.group_slab], device=dev)
+        # The rank buffers are free once the tables are written: they hold the rows per group.
+        row_count = self.group_rank[:groups]
+        row_end = self.cell_rank[:groups]
+        self.work_counts.zero_()
+        wp.launch(kernels._plan_rows, dim=groups,
+                  inputs=[groups, self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
+                          self.group_axis, self.group_slab, slab],
+                  outputs=[self.group_mask, row_count, self.work_counts], device=dev)
+        wp.utils.array_scan(row_count, row_end, inclusive=True)
+        wp.launch(kernels._gather_row_info, dim=1, inputs=[row_end, self.work_counts], outputs=[self.table_info],
+                  device=dev)
         info = self.table_info.numpy()
+        rows = int(info[2])
         self.stats.groups = int(info[0])
         self.stats.cells = int(info[1])
-        self.stats.bv_tests = int(info[2])
+        self.stats.rows = rows
+        self.stats.face_tests = int(info[3])
+        self.stats.slab_tests = int(info[4])
+        self.stats.bv_tests = self.stats.face_tests + self.stats.slab_tests
+        if rows == 0:
+            return
+        if rows > self.row_capacity:
+            self._allocate_rows(int(rows * _GROWTH) + 1)
+        wp.launch(kernels._write_rows, dim=groups,
+                  inputs=[groups, self.group_start, self.group_end, self.group_cell, self.cell_end, self.group_mask,
+                          slab.enabled, row_count, row_end],
+                  outputs=[self.row_span, self.row_work], device=dev)
+        wp.utils.array_scan(self.row_work[:rows], self.row_scan[:rows], inclusive=True)
 
     def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, grid: kernels.GridArgs) -> None:
-        """One thread per BV test, in batches; grows the pair buffer and re-runs on overflow. Sync point 4."""
+        """One thread per BV test, in batches; grows the pair buffer and re-runs on overflow. Sync point 5."""
         tables = kernels.TableArgs()
         tables.entry_key = self.entry_key
         tables.entry_face = self.entry_face
         tables.group_start = self.group_start
         tables.group_end = self.group_end
-        tables.group_cell = self.group_cell
-        tables.cell_end = self.cell_end
+        tables.row_span = self.row_span
         tables.row_work = self.row_work
         tables.row_scan = self.row_scan
-        tables.group_count = self.stats.groups
-        total = self.stats.bv_tests
+        tables.row_count = self.stats.rows
+        total = self.stats.face_tests
         while True:
             self.counts.zero_()
             per_thread = self.tests_per_thread
