@@ -77,13 +77,13 @@ GROUP_SLAB_RELATIVE_PAD: float = 2.0**-20
 """Relative growth of the group slabs of the spatial hash (:mod:`pscc.collision.spatial_hash`).
 
 A group's slab is the interval of s = a . p over its faces' vertices p (both ends of the step) along
-an axis a, grown by ``d/2 (1 + pad) + pad (M + d/2)``, where M is the largest |p|_1 of those vertices.
-The float32 dot product errs by at most 3 u sum_k |a_k p_k| <= 3 u (1 + 2u) M (|a_k| <= 1 + 2u for
-the normalised axis), the half distance projected on a unit axis is at most d/2 |a| <= d/2 (1 + 2u),
-and the two additions that grow the ends and the comparison of the ends round by at most
-2 u (|s| + d/2 + pad M); pad = 16 u covers all of it. So two groups whose grown slabs miss each
-other hold no pair of faces closer than d, and such a pair's box test may be skipped.
-Dimensionless.
+a unit axis a; each end is grown by ``d/2 (1 + pad) + pad (M + d/2)``, where M >= |p|_1 for every
+vertex of the scene (from the scene box). The float32 dot product errs by at most
+3 u sum_k |a_k p_k| <= 3 u (1 + 2u) M (|a_k| <= 1 + 2u for the normalised axis), the half distance
+projected on the axis is at most d/2 |a| <= d/2 (1 + 2u), and the additions that grow the ends and
+the comparison of the ends round by at most 2 u (|s| + d/2 + pad M); pad = 16 u covers all of it.
+So two groups whose grown slabs miss each other hold no pair of faces closer than d, and the box
+tests of their face pairs may be skipped. Dimensionless.
 """
 
 NORMAL_CONE_MARGIN: float = 1.0e-5

@@ -9,7 +9,8 @@ and DCD at the step's end (contact radius = half the mean edge length):
 - median seconds per ``detect()`` call and per stage; device bytes per triangle.
 
 Newton's ``TriMeshCollisionDetector`` (the ``newton`` package, a benchmark-only extra) runs the
-same DCD frames at the same radius: refit plus vertex-triangle and edge-edge queries.
+same DCD frames at the same radius: refit plus vertex-triangle and edge-edge queries. Its calls
+alternate with pscc's DCD calls (one of each per repeat), so both medians see the same machine load.
 """
 
 from __future__ import annotations
@@ -72,8 +73,24 @@ def _median(run: Any, repeats: int) -> tuple[float, Any]:
     return statistics.median(times), result
 
 
-def bench_methods(mesh: MeshData, device: str, repeats: int) -> list[dict[str, Any]]:
-    """Every pscc method on one scene, CCD and DCD."""
+def _paired_medians(run: Any, other: Any, repeats: int) -> tuple[float, Any, float]:
+    """Medians of ``run`` and ``other`` timed alternately (after one warm-up call of each)."""
+    result = run()
+    other()
+    times, other_times = [], []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        result = run()
+        times.append(time.perf_counter() - started)
+        started = time.perf_counter()
+        other()
+        other_times.append(time.perf_counter() - started)
+    return statistics.median(times), result, statistics.median(other_times)
+
+
+def bench_methods(mesh: MeshData, device: str, repeats: int, newton: Any = None) -> list[dict[str, Any]]:
+    """Every pscc method on one scene, CCD and DCD. With ``newton`` (a :class:`NewtonDetection`),
+    its DCD calls alternate with pscc's and its row is appended."""
     radius = contact_radius(mesh)
     rows = []
     pairs_by_mode: dict[str, tuple[int, int]] = {}
@@ -87,7 +104,10 @@ def bench_methods(mesh: MeshData, device: str, repeats: int) -> list[dict[str, A
             else:
                 def run(detector=detector):
                     return detector.detect(mesh.vertices_end, thickness=radius)
-            seconds, result = _median(run, repeats)
+            if method == "pscc" and mode == "dcd" and newton is not None:
+                seconds, result, newton_seconds = _paired_medians(run, newton.run, repeats)
+            else:
+                seconds, result = _median(run, repeats)
             stats = result.stats
             pairs = (stats["vertex_face_pairs"], stats["edge_edge_pairs"])
             if mode == "ccd" and pairs_by_mode.setdefault(mode, pairs) != pairs:
@@ -95,6 +115,7 @@ def bench_methods(mesh: MeshData, device: str, repeats: int) -> list[dict[str, A
             rows.append({
                 "method": method, "mode": mode, "seconds": seconds, "radius": radius if mode == "dcd" else 0.0,
                 "bv_tests": stats["bv_tests"], "box_pairs": stats.get("box_pairs", 0),
+                "slab_tests": stats.get("grid", {}).get("slab_tests", 0),
                 "triangle_pairs": stats["triangle_pairs"],
                 "self_triangle_pairs": stats["self_triangle_pairs"], "front_size": stats["front_size"],
                 "candidate_pairs": stats["candidate_pairs"], "vertex_face_pairs": pairs[0],
@@ -102,39 +123,54 @@ def bench_methods(mesh: MeshData, device: str, repeats: int) -> list[dict[str, A
                 "stage_seconds": {k: v for k, v in stats["seconds"].items() if k not in ("total", "setup")},
             })
             rows[-1]["device_seconds"] = sum(v for k, v in rows[-1]["stage_seconds"].items() if k != "output")
+    if newton is not None:
+        rows.append(newton.row(newton_seconds))
     return rows
 
 
-def bench_newton(mesh: MeshData, device: str, repeats: int) -> dict[str, Any] | None:
-    """Newton's TriMeshCollisionDetector on the DCD frame of the scene; None when newton is missing."""
-    try:
+class NewtonDetection:
+    """Newton's TriMeshCollisionDetector on the DCD frame of a scene (refit + vertex-triangle +
+    edge-edge queries at pscc's contact radius); :meth:`create` gives None when newton is missing."""
+
+    def __init__(self, mesh: MeshData, device: str) -> None:
         import newton
         from newton._src.geometry.tri_mesh_collision import TriMeshCollisionDetector
-    except ImportError:
-        return None
-    radius = contact_radius(mesh)
-    builder = newton.ModelBuilder()
-    builder.add_cloth_mesh(
-        pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
-        vertices=[wp.vec3(*v) for v in mesh.vertices.tolist()], indices=mesh.faces.reshape(-1).tolist(),
-        density=0.02, tri_ke=0.0, tri_ka=0.0, tri_kd=0.0,
-    )
-    model = builder.finalize(device=device)
-    detector = TriMeshCollisionDetector(model=model, init_collision_info=True)
-    positions = wp.array(mesh.vertices_end, dtype=wp.vec3, device=device)
 
-    def run():
-        detector.refit(positions)
-        detector.vertex_triangle_collision_detection(radius)
-        detector.edge_edge_collision_detection(radius)
-        wp.synchronize_device(device)
+        self.radius = contact_radius(mesh)
+        self.device = device
+        builder = newton.ModelBuilder()
+        builder.add_cloth_mesh(
+            pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
+            vertices=[wp.vec3(*v) for v in mesh.vertices.tolist()], indices=mesh.faces.reshape(-1).tolist(),
+            density=0.02, tri_ke=0.0, tri_ka=0.0, tri_kd=0.0,
+        )
+        self.model = builder.finalize(device=device)
+        self.detector = TriMeshCollisionDetector(model=self.model, init_collision_info=True)
+        self.positions = wp.array(mesh.vertices_end, dtype=wp.vec3, device=device)
 
-    seconds, _ = _median(run, repeats)
-    vertex_face = int(detector.vertex_colliding_triangles_count.numpy().sum())
-    edge_edge = int(detector.edge_colliding_edges_count.numpy().sum()) // 2  # each pair is listed per edge
-    return {"method": "newton", "mode": "dcd", "seconds": seconds, "radius": radius,
-            "vertex_face_pairs": vertex_face, "edge_edge_pairs": edge_edge,
-            "overflow": bool(detector.resize_flags.numpy().any())}
+    @classmethod
+    def create(cls, mesh: MeshData, device: str) -> NewtonDetection | None:
+        """The runner, or None when the ``newton`` package is not installed."""
+        try:
+            return cls(mesh, device)
+        except ImportError:
+            return None
+
+    def run(self) -> None:
+        """One detection: refit, vertex-triangle and edge-edge queries, then a device sync."""
+        self.detector.refit(self.positions)
+        self.detector.vertex_triangle_collision_detection(self.radius)
+        self.detector.edge_edge_collision_detection(self.radius)
+        wp.synchronize_device(self.device)
+
+    def row(self, seconds: float) -> dict[str, Any]:
+        """The benchmark row of the last detection, timed at ``seconds``."""
+        detector = self.detector
+        vertex_face = int(detector.vertex_colliding_triangles_count.numpy().sum())
+        edge_edge = int(detector.edge_colliding_edges_count.numpy().sum()) // 2  # each pair is listed per edge
+        return {"method": "newton", "mode": "dcd", "seconds": seconds, "radius": self.radius,
+                "vertex_face_pairs": vertex_face, "edge_edge_pairs": edge_edge,
+                "overflow": bool(detector.resize_flags.numpy().any())}
 
 
 def run(sizes: list[int], device: str, repeats: int, with_newton: bool = True) -> list[dict[str, Any]]:
@@ -143,12 +179,9 @@ def run(sizes: list[int], device: str, repeats: int, with_newton: bool = True) -
     for scene, make in SCENES.items():
         for triangles in sizes:
             mesh = make(triangles)
-            for row in bench_methods(mesh, device, repeats):
+            newton = NewtonDetection.create(mesh, device) if with_newton else None
+            for row in bench_methods(mesh, device, repeats, newton):
                 rows.append({"scene": scene, "triangles": mesh.face_count, **row})
-            if with_newton:
-                newton_row = bench_newton(mesh, device, repeats)
-                if newton_row is not None:
-                    rows.append({"scene": scene, "triangles": mesh.face_count, **newton_row})
     return rows
 
 
@@ -163,28 +196,32 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
         "`TriMeshCollisionDetector` (refit + vertex-triangle + edge-edge queries) on the same DCD frame",
         "and radius. Colliding pairs are identical for every method in CCD (checked by the run).",
         "",
-        "`box pairs` are the triangle pairs whose boxes overlap (the hash's output); `triangle pairs` are",
-        "those left after the supporting-plane test (`pscc/collision/pair_filter.py`), which both methods",
-        "run; `candidates` are the feature pairs given to the narrow phase.",
+        "`BV tests` counts every bounding-volume test: face box tests, plus for pscc the group slab tests",
+        "(`slab tests`: two {cell, node} groups of a cell tested as wholes along a group normal before",
+        "their face pairs; `docs/spatial-hash.md`). `box pairs` are the triangle pairs whose boxes overlap",
+        "(the hash's output); `triangle pairs` are those left after the supporting-plane test",
+        "(`pscc/collision/pair_filter.py`), which both methods run; `candidates` are the feature pairs",
+        "given to the narrow phase.",
         "",
         "`seconds` is a whole `detect()` call, which ends by copying the pairs to the host and sorting",
         "them into canonical rows (the `output` stage). Newton's detector leaves its results on the",
         "device, so the last ratio column compares it with pscc's stages up to the narrow phase",
-        "(`device seconds`: everything but `output`).",
+        "(`device seconds`: everything but `output`). pscc's DCD calls and Newton's alternate, one of",
+        "each per repeat, so both medians see the same load of this shared machine.",
         "",
-        "| scene | triangles | mode | method | BV tests | box pairs | triangle pairs | front | candidates | VF | EE | "
-        "seconds | bytes/triangle |",
-        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| scene | triangles | mode | method | BV tests | slab tests | box pairs | triangle pairs | front | candidates "
+        "| VF | EE | seconds | bytes/triangle |",
+        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         if r["method"] == "newton":
-            lines.append(f"| {r['scene']} | {r['triangles']:,} | DCD | newton | | | | | | "
+            lines.append(f"| {r['scene']} | {r['triangles']:,} | DCD | newton | | | | | | | "
                          f"{r['vertex_face_pairs']:,} | "
                          f"{r['edge_edge_pairs']:,} | {r['seconds']:.3f} | |")
             continue
         lines.append(
             f"| {r['scene']} | {r['triangles']:,} | {r['mode'].upper()} | {r['method']} | {r['bv_tests']:,} | "
-            f"{r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | {r['candidate_pairs']:,} | "
+            f"{r.get('slab_tests', 0):,} | {r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | {r['candidate_pairs']:,} | "
             f"{r['vertex_face_pairs']:,} | "
             f"{r['edge_edge_pairs']:,} | {r['seconds']:.3f} | {r['bytes_per_triangle']:.0f} |")
     lines += ["", "Ratios (pscc / spatial-hash; pscc / newton for DCD time):", "",

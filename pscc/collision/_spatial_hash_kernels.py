@@ -33,25 +33,26 @@ from pscc.geometry.aabb import boxes_overlap
 wp.set_module_options({"enable_backward": False})
 
 NODE_BITS: int = 32
-"""Low bits of an entry key that hold the node id (its uint32 bit pattern); the cell id sits above."""
+"""Most low bits of an entry key that hold the node id (its uint32 bit pattern); the cell id sits
+above. A call that bounds its node ids uses fewer (``GridArgs.node_bits``), so the sort has less to do."""
 
 MASK_BITS: int = 64
 """Later groups of a cell whose slab test result a group keeps (bits of ``group_mask``); later
 groups past these are always tested face by face (conservative)."""
 
-_NODE_SHIFT = wp.constant(wp.int64(NODE_BITS))
 _MASK_BITS = wp.constant(MASK_BITS)
 _SLAB_PAD = wp.constant(float(tolerances.GROUP_SLAB_RELATIVE_PAD))
-_NODE_MASK = wp.constant(wp.int64((1 << NODE_BITS) - 1))
 
 
 @wp.struct
 class GridArgs:
-    """The uniform grid: cell of p = floor((p - origin) / cell_size) per axis."""
+    """The uniform grid: cell of p = floor((p - origin) / cell_size) per axis; ``node_bits`` low bits
+    of an entry key hold the node id."""
 
     origin: wp.vec3
     cell_size: float
     dims: wp.vec3i
+    node_bits: int
 
 
 @wp.struct
@@ -73,6 +74,8 @@ class SlabArgs:
     """Face geometry of the group slab test (``enabled`` = 0: every group pair is tested face by face).
 
     ``positions_t1`` is read only when ``swept`` != 0 (CCD: the slab holds both ends of the step).
+    ``margin`` grows each end of a slab: the half distance plus the rounding bound
+    ``GROUP_SLAB_RELATIVE_PAD (M + half_distance)``, M a bound on |p|_1 over the scene's vertices.
     """
 
     enabled: int
@@ -81,6 +84,7 @@ class SlabArgs:
     positions_t1: wp.array(dtype=wp.vec3)
     swept: int
     half_distance: float
+    margin: float
     min_work: wp.int64
 
 
@@ -100,15 +104,17 @@ def linear_cell_id(c: wp.vec3i, dims: wp.vec3i) -> wp.int64:
 
 
 @wp.func
-def entry_key(cell: wp.int64, node: int) -> wp.int64:
-    """The exact paired key {CellId, NodeId}: cell in the high bits, uint32(node) in the low 32."""
-    return (cell << _NODE_SHIFT) | (wp.int64(node) & _NODE_MASK)
+def entry_key(cell: wp.int64, node: int, node_bits: int) -> wp.int64:
+    """The exact paired key {CellId, NodeId}: cell in the high bits, the low ``node_bits`` bits of the
+    node's uint32 pattern below (all of them when node_bits = 32; else ids lie in [0, 2^node_bits))."""
+    mask = (wp.int64(1) << wp.int64(node_bits)) - wp.int64(1)
+    return (cell << wp.int64(node_bits)) | (wp.int64(node) & mask)
 
 
 @wp.func
-def key_cell(key: wp.int64) -> wp.int64:
-    """The cell half of an entry key."""
-    return key >> _NODE_SHIFT
+def key_cell(key: wp.int64, node_bits: int) -> wp.int64:
+    """The cell part of an entry key."""
+    return key >> wp.int64(node_bits)
 
 
 @wp.kernel
@@ -182,12 +188,18 @@ def _count_face_cells(
     face_upper: wp.array(dtype=wp.vec3),
     origin: wp.vec3,
     cell_size: float,
+    node_id: wp.array(dtype=wp.int32),
+    node_limit: int,
     # out:
     face_cells: wp.array(dtype=wp.int64),
     grid_max: wp.array(dtype=wp.int32),
 ):
-    """One thread per face."""
+    """One thread per face; grid_max[3] counts node ids outside [0, node_limit) (when node_limit > 0)."""
     f = wp.tid()
+    if node_limit > 0:
+        node = node_id[f]
+        if node < 0 or node >= node_limit:
+            wp.atomic_add(grid_max, 3, 1)
     lo = cell_of_point(face_lower[f], origin, cell_size)
     hi = cell_of_point(face_upper[f], origin, cell_size)
     face_cells[f] = wp.int64(hi[0] - lo[0] + 1) * wp.int64(hi[1] - lo[1] + 1) * wp.int64(hi[2] - lo[2] + 1)
@@ -204,10 +216,11 @@ def _gather_entry_info(
     # out:
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: [entries, N_x, N_y, N_z] in one array, so the host reads it at once."""
+    """A single thread: [entries, N_x, N_y, N_z, bad node ids] in one array, so the host reads it at once."""
     info[0] = face_end[face_end.shape[0] - 1]
     for k in range(3):
         info[1 + k] = wp.int64(grid_max[k] + 1)
+    info[4] = wp.int64(grid_max[3])
 
 
 @wp.kernel
@@ -232,7 +245,7 @@ def _fill_entries(
     for x in range(lo[0], hi[0] + 1):
         for y in range(lo[1], hi[1] + 1):
             for z in range(lo[2], hi[2] + 1):
-                keys[slot] = entry_key(linear_cell_id(wp.vec3i(x, y, z), grid.dims), node)
+                keys[slot] = entry_key(linear_cell_id(wp.vec3i(x, y, z), grid.dims), node, grid.node_bits)
                 faces[slot] = f
                 slot += 1
 
@@ -241,6 +254,7 @@ def _fill_entries(
 def _mark_runs(
     # in:
     keys: wp.array(dtype=wp.int64),
+    node_bits: int,
     # out:
     group_head: wp.array(dtype=wp.int32),
     cell_head: wp.array(dtype=wp.int32),
@@ -252,7 +266,7 @@ def _mark_runs(
     if i > 0:
         if keys[i] == keys[i - 1]:
             g = 0
-        if key_cell(keys[i]) == key_cell(keys[i - 1]):
+        if key_cell(keys[i], node_bits) == key_cell(keys[i - 1], node_bits):
             c = 0
     group_head[i] = g
     cell_head[i] = c
@@ -264,6 +278,7 @@ def _write_tables(
     keys: wp.array(dtype=wp.int64),
     group_rank: wp.array(dtype=wp.int32),
     cell_rank: wp.array(dtype=wp.int32),
+    node_bits: int,
     # out:
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
@@ -285,40 +300,29 @@ def _write_tables(
         group_cell[g] = c
     if i == n - 1 or keys[i + 1] != key:
         group_end[g] = i + 1
-    if i == n - 1 or key_cell(keys[i + 1]) != key_cell(key):
+    if i == n - 1 or key_cell(keys[i + 1], node_bits) != key_cell(key, node_bits):
         cell_end[c] = i + 1
 
 
 @wp.func
 def _project_group(
     entry_face: wp.array(dtype=wp.int32), start: int, end: int, axis: wp.vec3, slab: SlabArgs
-) -> wp.vec3:
+) -> wp.vec2:
     """(min, max) of axis . p over the vertices p of the faces of entries [start, end) at both ends of
-    the step (t0 only when not swept), and the largest |p|_1 (for the rounding bound)."""
+    the step (t0 only when not swept)."""
     lo = float(wp.inf)
     hi = float(-wp.inf)
-    size = float(0.0)
     for e in range(start, end):
         tri = slab.faces[entry_face[e]]
         for v in range(3):
-            p = slab.positions_t0[tri[v]]
-            s = wp.dot(axis, p)
+            s = wp.dot(axis, slab.positions_t0[tri[v]])
             lo = wp.min(lo, s)
             hi = wp.max(hi, s)
-            size = wp.max(size, wp.abs(p[0]) + wp.abs(p[1]) + wp.abs(p[2]))
             if slab.swept != 0:
-                q = slab.positions_t1[tri[v]]
-                s = wp.dot(axis, q)
+                s = wp.dot(axis, slab.positions_t1[tri[v]])
                 lo = wp.min(lo, s)
                 hi = wp.max(hi, s)
-                size = wp.max(size, wp.abs(q[0]) + wp.abs(q[1]) + wp.abs(q[2]))
-    return wp.vec3(lo, hi, size)
-
-
-@wp.func
-def _slab_margin(size: float, half_distance: float) -> float:
-    """Growth of a slab end: the half distance plus the rounding bound of GROUP_SLAB_RELATIVE_PAD."""
-    return half_distance * (1.0 + _SLAB_PAD) + _SLAB_PAD * (size + half_distance)
+    return wp.vec2(lo, hi)
 
 
 @wp.kernel
@@ -327,35 +331,43 @@ def _compute_group_slabs(
     entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
     slab: SlabArgs,
     # out:
     group_axis: wp.array(dtype=wp.vec3),
-    group_slab: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
 ):
-    """One thread per group: axis = normalised sum of its faces' unit normals at mid-step (any axis
-    is valid; this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
-    A zero axis (normals that cancel, degenerate faces) marks a group that is never culled."""
+    """One thread per group: axis = unit normal of its middle face at mid-step (any axis is valid;
+    this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
+    A zero axis (a degenerate middle face) marks a group that is never culled. Groups
+    whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped."""
     g = wp.tid()
     start = group_start[g]
     end = group_end[g]
-    total = wp.vec3(0.0, 0.0, 0.0)
-    for e in range(start, end):
-        tri = slab.faces[entry_face[e]]
-        a = slab.positions_t0[tri[0]]
-        b = slab.positions_t0[tri[1]]
-        c = slab.positions_t0[tri[2]]
-        if slab.swept != 0:
-            a = 0.5 * (a + slab.positions_t1[tri[0]])
-            b = 0.5 * (b + slab.positions_t1[tri[1]])
-            c = 0.5 * (c + slab.positions_t1[tri[2]])
-        n = wp.cross(b - a, c - a)
-        length = wp.length(n)
-        if length > 0.0:
-            total += n / length
-    length = wp.length(total)
+    cell = group_cell[g]
+    cell_start = int(0)
+    if cell > 0:
+        cell_start = cell_end[cell - 1]
+    others = (cell_end[cell] - cell_start) - (end - start)
+    if wp.int64(end - start) * wp.int64(others) < slab.min_work:
+        group_axis[g] = wp.vec3(0.0, 0.0, 0.0)
+        return
+    # The normal of the group's middle face (entries of a group are in face order): one cross product
+    # instead of a pass over the group; on a flat patch every face gives nearly the same axis.
+    tri = slab.faces[entry_face[(start + end) // 2]]
+    a = slab.positions_t0[tri[0]]
+    b = slab.positions_t0[tri[1]]
+    c = slab.positions_t0[tri[2]]
+    if slab.swept != 0:
+        a = 0.5 * (a + slab.positions_t1[tri[0]])
+        b = 0.5 * (b + slab.positions_t1[tri[1]])
+        c = 0.5 * (c + slab.positions_t1[tri[2]])
+    n = wp.cross(b - a, c - a)
+    length = wp.length(n)
     axis = wp.vec3(0.0, 0.0, 0.0)
-    if length > 1.0e-3:
-        axis = total / length
+    if length > 0.0:
+        axis = n / length
     group_axis[g] = axis
     group_slab[g] = _project_group(entry_face, start, end, axis, slab)
 
@@ -364,7 +376,7 @@ def _compute_group_slabs(
 def _slab_pair_passes(
     entry_face: wp.array(dtype=wp.int32),
     group_axis: wp.array(dtype=wp.vec3),
-    group_slab: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
     g: int,
     g_start: int,
     g_end: int,
@@ -387,11 +399,9 @@ def _slab_pair_passes(
         return True
     own = group_slab[owner]
     other = _project_group(entry_face, other_start, other_end, axis, slab)
-    own_margin = _slab_margin(own[2], slab.half_distance)
-    other_margin = _slab_margin(other[2], slab.half_distance)
-    if other[0] - other_margin > own[1] + own_margin:
+    if other[0] - slab.margin > own[1] + slab.margin:
         return False
-    if own[0] - own_margin > other[1] + other_margin:
+    if own[0] - slab.margin > other[1] + slab.margin:
         return False
     return True
 
@@ -406,7 +416,7 @@ def _plan_rows(
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
     group_axis: wp.array(dtype=wp.vec3),
-    group_slab: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
     slab: SlabArgs,
     # out:
     group_mask: wp.array(dtype=wp.uint64),
@@ -599,7 +609,7 @@ def _test_bounding_volumes(
     entry_a = group_starts[g] + int(q // rest)
     entry_b = b_start + int(q % rest)
     row_key = entry_key[group_starts[g]]
-    row_cell = key_cell(row_key)
+    row_cell = key_cell(row_key, grid.node_bits)
     last_a = group_ends[g]
     fa = entry_face[entry_a]
     lower_a = face_lower[fa]
@@ -649,7 +659,7 @@ def _test_bounding_volumes(
                 entry_b = b_start
                 last_a = group_ends[g]
                 row_key = entry_key[entry_a]
-                row_cell = key_cell(row_key)
+                row_cell = key_cell(row_key, grid.node_bits)
             fa = entry_face[entry_a]
             lower_a = face_lower[fa]
             upper_a = face_upper[fa]

@@ -274,7 +274,8 @@ class CollisionDetector:
             mark = time.perf_counter()
             pairs, box_pairs = self.spatial_hash.find_pairs(
                 self.boxes.face_lower, self.boxes.face_upper, node_id,
-                positions_t0=self._positions_t0, positions_t1=x1_device, half_distance=0.5 * h)
+                positions_t0=self._positions_t0, positions_t1=x1_device, half_distance=0.5 * h,
+                node_id_bound=self.bvh.node_count if node_id is not None else None)
             seconds["spatial_hash"] = time.perf_counter() - mark
             mark = time.perf_counter()
             self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
@@ -398,29 +399,39 @@ class CollisionDetector:
         """Copy the reported pairs to the host as sorted rows (a sync point)."""
         vf_count = self.candidates.vertex_face_count
         ee_count = self.candidates.edge_edge_count
-        vf_pairs = self.candidates.vertex_face.numpy()[:vf_count].reshape(-1, 2)
-        ee_pairs = self.candidates.edge_edge.numpy()[:ee_count].reshape(-1, 2)
-        vf_toi = self.narrow.vertex_face_toi.numpy()[:vf_count]
-        ee_toi = self.narrow.edge_edge_toi.numpy()[:ee_count]
-        vf_keep = vf_toi <= 1.0
-        ee_keep = ee_toi <= 1.0
-        vf_ids = vf_pairs[vf_keep].astype(np.int64)
-        ee_ids = ee_pairs[ee_keep].astype(np.int64)
-        vf_toi = vf_toi[vf_keep]
-        ee_toi = ee_toi[ee_keep]
+        vf_pairs = self.candidates.vertex_face[:vf_count].numpy().reshape(-1, 2)
+        ee_pairs = self.candidates.edge_edge[:ee_count].numpy().reshape(-1, 2)
+        vf_toi = self.narrow.vertex_face_toi[:vf_count].numpy()
+        ee_toi = self.narrow.edge_edge_toi[:ee_count].numpy()
         # One int64 key per row gives the lexicographic order: (vertex, face), and (edge a, edge b)
-        # with edges sorted lexicographically, so edge-id order is vertex-tuple order.
-        vf_order = np.argsort(vf_ids[:, 0] * self._faces_np.shape[0] + vf_ids[:, 1], kind="stable")
-        ee_order = np.argsort(ee_ids[:, 0] * self.topology.edge_count + ee_ids[:, 1], kind="stable")
-        vertex_face = vf_ids[vf_order].astype(np.int32)
+        # with edges sorted lexicographically, so edge-id order is vertex-tuple order. Every feature
+        # pair is a candidate once, so the keys are unique and any sort gives the same order.
+        m = self._faces_np.shape[0]
+        edge_count = self.topology.edge_count
+        vf_keep = np.flatnonzero(vf_toi <= 1.0)
+        ee_keep = np.flatnonzero(ee_toi <= 1.0)
+        vf_key = vf_pairs[vf_keep, 0].astype(np.int64) * m + vf_pairs[vf_keep, 1]
+        ee_key = ee_pairs[ee_keep, 0].astype(np.int64) * edge_count + ee_pairs[ee_keep, 1]
+        if ccd:
+            vf_order = np.argsort(vf_key)
+            ee_order = np.argsort(ee_key)
+            vf_key = vf_key[vf_order]
+            ee_key = ee_key[ee_order]
+            vf_toi = vf_toi[vf_keep[vf_order]]
+            ee_toi = ee_toi[ee_keep[ee_order]]
+        else:
+            vf_key.sort()
+            ee_key.sort()
+        vertex_face = np.empty((vf_key.shape[0], 2), dtype=np.int32)
+        vertex_face[:, 0] = vf_key // m
+        vertex_face[:, 1] = vf_key % m
         edges = self.topology.edges
-        ee_sorted = ee_ids[ee_order]
-        edge_edge = np.concatenate([edges[ee_sorted[:, 0]], edges[ee_sorted[:, 1]]], axis=1).astype(np.int32)
-        vf_toi = vf_toi[vf_order]
-        ee_toi = ee_toi[ee_order]
+        edge_edge = np.empty((ee_key.shape[0], 4), dtype=np.int32)
+        edge_edge[:, 0:2] = edges[ee_key // edge_count]
+        edge_edge[:, 2:4] = edges[ee_key % edge_count]
         return CollisionResult(
-            vertex_face=np.ascontiguousarray(vertex_face).reshape(-1, 2),
-            edge_edge=np.ascontiguousarray(edge_edge).reshape(-1, 4),
+            vertex_face=vertex_face,
+            edge_edge=edge_edge,
             vertex_face_toi=vf_toi.astype(np.float32) if ccd else None,
             edge_edge_toi=ee_toi.astype(np.float32) if ccd else None,
         )

@@ -30,8 +30,8 @@ group_start / group_end    (E,) / (G,) int32     entry range of group g (triangl
                                                  group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
-group_axis / group_slab    (G,) vec3 / vec3      slab test only: axis of group g / (min, max) of its faces
-                                                 on the axis and their largest |p|_1 (1 slot when off)
+group_axis / group_slab    (G,) vec3 / vec2      slab test only: axis of group g / (min, max) of its
+                                                 faces' vertices on the axis (1 slot when off)
 group_mask                 (G,) uint64           slab test only: bit t = the t-th later group of the cell
                                                  passed (or was not tested)
 row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from pscc import tolerances
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.errors import CapacityError, InputError
 
@@ -253,8 +254,8 @@ class SpatialHash:
         self.scene = wp.zeros(8, dtype=wp.float64, device=dev)
         self.face_cells = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
-        self.grid_max = wp.zeros(3, dtype=wp.int32, device=dev)
-        self.entry_info = wp.zeros(4, dtype=wp.int64, device=dev)
+        self.grid_max = wp.zeros(4, dtype=wp.int32, device=dev)
+        self.entry_info = wp.zeros(5, dtype=wp.int64, device=dev)
         self.table_info = wp.zeros(5, dtype=wp.int64, device=dev)
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
         self.work_counts = wp.zeros(2, dtype=wp.int64, device=dev)
@@ -289,7 +290,7 @@ class SpatialHash:
         self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
         slab_capacity = capacity if self.group_slab_test else 1
         self.group_axis = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
-        self.group_slab = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
+        self.group_slab = wp.empty(slab_capacity, dtype=wp.vec2, device=dev)
         self.group_mask = wp.empty(slab_capacity, dtype=wp.uint64, device=dev)
 
     def _allocate_rows(self, capacity: int) -> None:
@@ -345,6 +346,7 @@ class SpatialHash:
         positions_t0: wp.array | None = None,
         positions_t1: wp.array | None = None,
         half_distance: float = 0.0,
+        node_id_bound: int | None = None,
     ) -> tuple[wp.array, int]:
         """All face pairs (a < b) whose closed boxes overlap and whose node ids differ (with the
         group slab test: less the pairs of groups separated along a group axis, none of which is
@@ -365,13 +367,17 @@ class SpatialHash:
                 given (without node ids every group is one face and no group is slab-tested).
             positions_t1: positions at the end of the step (CCD; ``None``: discrete).
             half_distance: the half distance the boxes were grown by (length units, >= 0).
+            node_id_bound: every node id lies in [0, node_id_bound): the keys then need only
+                bit_length(node_id_bound - 1) node bits, and the sort fewer passes (``None``: any
+                int32 ids, 32 bits). Checked on the device.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
             (a, b) and valid until the next call, and the number of pairs.
 
         Raises:
-            InputError: wrong array, non-finite or inverted box, bad cell size.
+            InputError: wrong array, non-finite or inverted box, bad cell size, a node id outside
+                [0, node_id_bound).
             CapacityError: more entries or pairs than int32 indexing allows.
 
         Allocates: when a buffer grows. Capture-safe: no.
@@ -380,8 +386,13 @@ class SpatialHash:
         self._check_array(face_upper, "face_upper", wp.vec3)
         if node_id is None:
             node_id = self.own_node_id
+            node_id_bound = max(1, self.face_count)
         else:
             self._check_array(node_id, "node_id", wp.int32)
+        if node_id_bound is not None and (isinstance(node_id_bound, bool) or not isinstance(node_id_bound, int | np.integer)
+                                          or not 1 <= node_id_bound <= 2**31):
+            raise InputError("argument", "node_id_bound", f"{node_id_bound!r} is not an integer in [1, 2^31]",
+                             "pass one more than the largest node id, or None")
         if cell_size is not None:
             cell_size = _check_positive(cell_size, "cell_size")
         slab = self._slab_args(node_id is not self.own_node_id, positions_t0, positions_t1, half_distance)
@@ -395,14 +406,17 @@ class SpatialHash:
             return self.pairs[:0], 0
 
         origin, extent, mean_length = self._scene_bounds(face_lower, face_upper)
+        self._slab_margin(slab, origin, extent)
         if cell_size is None:
             cell_size = self.cell_size_factor * mean_length
             if not cell_size > 0.0:  # every box is degenerate: one cell per scene extent
                 cell_size = max(float(np.max(extent)), 1.0)
         grid = kernels.GridArgs()
         grid.origin = wp.vec3(*origin)
-        entries = self._insert_faces(face_lower, face_upper, node_id, grid, cell_size, extent)
-        self._build_tables(entries, slab)
+        grid.node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
+        node_limit = 0 if node_id_bound is None else int(node_id_bound)
+        entries = self._insert_faces(face_lower, face_upper, node_id, node_limit, grid, cell_size, extent)
+        self._build_tables(entries, grid.node_bits, slab)
         self._test_pairs(face_lower, face_upper, grid)
         if self.sort_pairs:
             self._sort_pairs()
@@ -418,6 +432,7 @@ class SpatialHash:
         slab.faces = self.faces
         slab.swept = 0
         slab.half_distance = 0.0
+        slab.margin = 0.0
         slab.min_work = self.slab_min_work
         if not (self.group_slab_test and grouped):
             slab.positions_t0 = slab.positions_t1 = self.chunk_lower
@@ -447,6 +462,16 @@ class SpatialHash:
         slab.swept = 0 if positions_t1 is None else 1
         slab.half_distance = half
         return slab
+
+    @staticmethod
+    def _slab_margin(slab: kernels.SlabArgs, origin: np.ndarray, extent: np.ndarray) -> None:
+        """Set the slab growth from the scene box (it contains every face box, so every vertex):
+        M = sum_k max(|lower_k|, |upper_k|) bounds |p|_1 (``tolerances.GROUP_SLAB_RELATIVE_PAD``)."""
+        lower = origin.astype(np.float64)
+        upper = lower + extent
+        size = float(np.maximum(np.abs(lower), np.abs(upper)).sum())
+        pad = tolerances.GROUP_SLAB_RELATIVE_PAD
+        slab.margin = float(slab.half_distance * (1.0 + pad) + pad * (size + slab.half_distance))
 
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b).
@@ -479,8 +504,8 @@ class SpatialHash:
         return origin, extent, float(scene[6]) / self.face_count
 
     def _insert_faces(
-        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, grid: kernels.GridArgs,
-        cell_size: float, extent: np.ndarray,
+        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_limit: int,
+        grid: kernels.GridArgs, cell_size: float, extent: np.ndarray,
     ) -> int:
         """Count, scan and fill the (key, face) entries, then sort them. Sync point 2.
 
@@ -497,12 +522,16 @@ class SpatialHash:
                 self.stats.coarsenings += 1
                 continue
             self.grid_max.zero_()
-            wp.launch(kernels._count_face_cells, dim=m, inputs=[face_lower, face_upper, grid.origin, cell_size],
+            wp.launch(kernels._count_face_cells, dim=m,
+                      inputs=[face_lower, face_upper, grid.origin, cell_size, node_id, node_limit],
                       outputs=[self.face_cells, self.grid_max], device=dev)
             wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
             wp.launch(kernels._gather_entry_info, dim=1, inputs=[self.face_end, self.grid_max],
                       outputs=[self.entry_info], device=dev)
             info = self.entry_info.numpy()
+            if info[4] > 0:
+                raise InputError("argument", "node_id", f"{int(info[4])} node ids lie outside [0, {node_limit})",
+                                 "pass node ids below node_id_bound, or node_id_bound=None")
             entries = int(info[0])
             dims = tuple(int(n) for n in info[1:4])
             if entries > max_entries or math.prod(dims) > MAX_GRID_CELLS:
@@ -521,29 +550,30 @@ class SpatialHash:
                   inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, grid],
                   outputs=[self.entry_key, self.entry_face], device=dev)
         cell_bits = max(1, (math.prod(dims) - 1).bit_length())
-        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, 0, kernels.NODE_BITS + cell_bits)
+        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, 0, grid.node_bits + cell_bits)
         return entries
 
-    def _build_tables(self, entries: int, slab: kernels.SlabArgs) -> None:
+    def _build_tables(self, entries: int, node_bits: int, slab: kernels.SlabArgs) -> None:
         """Run heads -> ranks -> group and cell ranges -> slab tests and work rows -> row scan.
         Sync points 3 (group count) and 4 (cells, rows, face tests, slab tests)."""
         dev = self.device
         n = entries
         keys = self.entry_key[:n]
-        wp.launch(kernels._mark_runs, dim=n, inputs=[keys], outputs=[self.group_start[:n], self.cell_end[:n]],
+        wp.launch(kernels._mark_runs, dim=n, inputs=[keys, node_bits], outputs=[self.group_start[:n], self.cell_end[:n]],
                   device=dev)
         wp.utils.array_scan(self.group_start[:n], self.group_rank[:n], inclusive=True)
         wp.utils.array_scan(self.cell_end[:n], self.cell_rank[:n], inclusive=True)
         groups = int(self.group_rank[n - 1 : n].numpy()[0])
         if groups > self.group_capacity:
             self._allocate_groups(int(groups * _GROWTH) + 1)
-        wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n]],
+        wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n], node_bits],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
         wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank[:n], self.cell_rank[:n]],
                   outputs=[self.table_info], device=dev)
         if slab.enabled:
             wp.launch(kernels._compute_group_slabs, dim=groups,
-                      inputs=[self.entry_face, self.group_start, self.group_end, slab],
+                      inputs=[self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
+                              slab],
                       outputs=[self.group_axis, self.group_slab], device=dev)
         # The rank buffers are free once the tables are written: they hold the rows per group.
         row_count = self.group_rank[:groups]
