@@ -73,11 +73,21 @@ def _median(run: Any, repeats: int) -> tuple[float, Any]:
     return statistics.median(times), result
 
 
-def _paired_medians(run: Any, other: Any, repeats: int) -> tuple[float, Any, float]:
-    """Medians of ``run`` and ``other`` timed alternately (after one warm-up call of each)."""
+def _device_seconds(result: Any) -> float:
+    """Seconds of a detect() call up to the narrow phase (every stage but ``output``)."""
+    return sum(v for k, v in result.stats["seconds"].items() if k not in ("total", "setup", "output"))
+
+
+def _paired_medians(run: Any, other: Any, repeats: int) -> tuple[float, Any, float, float, float]:
+    """``run`` and ``other`` timed alternately (after one warm-up call of each).
+
+    Returns the median seconds of ``run``, its last result, the median seconds of ``other``, and the
+    medians of the per-repeat ratios run / other and device seconds of run / other: each ratio
+    compares two calls made back to back, so slow and fast phases of a shared machine cancel.
+    """
     result = run()
     other()
-    times, other_times = [], []
+    times, other_times, ratios, device_ratios = [], [], [], []
     for _ in range(repeats):
         started = time.perf_counter()
         result = run()
@@ -85,7 +95,10 @@ def _paired_medians(run: Any, other: Any, repeats: int) -> tuple[float, Any, flo
         started = time.perf_counter()
         other()
         other_times.append(time.perf_counter() - started)
-    return statistics.median(times), result, statistics.median(other_times)
+        ratios.append(times[-1] / other_times[-1])
+        device_ratios.append(_device_seconds(result) / other_times[-1])
+    return (statistics.median(times), result, statistics.median(other_times), statistics.median(ratios),
+            statistics.median(device_ratios))
 
 
 def bench_methods(mesh: MeshData, device: str, repeats: int, newton: Any = None) -> list[dict[str, Any]]:
@@ -104,8 +117,10 @@ def bench_methods(mesh: MeshData, device: str, repeats: int, newton: Any = None)
             else:
                 def run(detector=detector):
                     return detector.detect(mesh.vertices_end, thickness=radius)
+            paired: dict[str, float] = {}
             if method == "pscc" and mode == "dcd" and newton is not None:
-                seconds, result, newton_seconds = _paired_medians(run, newton.run, repeats)
+                seconds, result, newton_seconds, ratio, device_ratio = _paired_medians(run, newton.run, repeats)
+                paired = {"newton_ratio": ratio, "newton_device_ratio": device_ratio}
             else:
                 seconds, result = _median(run, repeats)
             stats = result.stats
@@ -122,7 +137,8 @@ def bench_methods(mesh: MeshData, device: str, repeats: int, newton: Any = None)
                 "edge_edge_pairs": pairs[1], "bytes_per_triangle": stats["device_bytes"]["total"] / mesh.face_count,
                 "stage_seconds": {k: v for k, v in stats["seconds"].items() if k not in ("total", "setup")},
             })
-            rows[-1]["device_seconds"] = sum(v for k, v in rows[-1]["stage_seconds"].items() if k != "output")
+            rows[-1]["device_seconds"] = _device_seconds(result)
+            rows[-1].update(paired)
     if newton is not None:
         rows.append(newton.row(newton_seconds))
     return rows
@@ -207,7 +223,8 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
         "them into canonical rows (the `output` stage). Newton's detector leaves its results on the",
         "device, so the last ratio column compares it with pscc's stages up to the narrow phase",
         "(`device seconds`: everything but `output`). pscc's DCD calls and Newton's alternate, one of",
-        "each per repeat, so both medians see the same load of this shared machine.",
+        "each per repeat; the ratio columns are medians of the per-repeat ratios (two calls made back to",
+        "back), because this shared machine runs in slow and fast phases that shift whole medians.",
         "",
         "| scene | triangles | mode | method | BV tests | slab tests | box pairs | triangle pairs | front | candidates "
         "| VF | EE | seconds | bytes/triangle |",
@@ -221,8 +238,8 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
             continue
         lines.append(
             f"| {r['scene']} | {r['triangles']:,} | {r['mode'].upper()} | {r['method']} | {r['bv_tests']:,} | "
-            f"{r.get('slab_tests', 0):,} | {r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | {r['candidate_pairs']:,} | "
-            f"{r['vertex_face_pairs']:,} | "
+            f"{r.get('slab_tests', 0):,} | {r['box_pairs']:,} | {r['triangle_pairs']:,} | {r['front_size']:,} | "
+            f"{r['candidate_pairs']:,} | {r['vertex_face_pairs']:,} | "
             f"{r['edge_edge_pairs']:,} | {r['seconds']:.3f} | {r['bytes_per_triangle']:.0f} |")
     lines += ["", "Ratios (pscc / spatial-hash; pscc / newton for DCD time):", "",
               "| scene | triangles | mode | triangle pairs | BV tests | time | time vs newton | device vs newton |",
@@ -233,8 +250,10 @@ def report(rows: list[dict[str, Any]]) -> list[str]:
             continue
         base = index[(scene, triangles, mode, "spatial-hash")]
         newton_row = index.get((scene, triangles, mode, "newton"))
-        vs_newton = f"{r['seconds'] / newton_row['seconds']:.2f}" if newton_row else ""
-        device_vs_newton = f"{r['device_seconds'] / newton_row['seconds']:.2f}" if newton_row else ""
+        vs_newton = device_vs_newton = ""
+        if newton_row:
+            vs_newton = f"{r.get('newton_ratio', r['seconds'] / newton_row['seconds']):.2f}"
+            device_vs_newton = f"{r.get('newton_device_ratio', r['device_seconds'] / newton_row['seconds']):.2f}"
         lines.append(f"| {scene} | {triangles:,} | {mode.upper()} | "
                      f"{r['triangle_pairs'] / max(1, base['triangle_pairs']):.3f} | "
                      f"{r['bv_tests'] / max(1, base['bv_tests']):.3f} | {r['seconds'] / base['seconds']:.2f} | "

@@ -389,7 +389,8 @@ class SpatialHash:
             node_id_bound = max(1, self.face_count)
         else:
             self._check_array(node_id, "node_id", wp.int32)
-        if node_id_bound is not None and (isinstance(node_id_bound, bool) or not isinstance(node_id_bound, int | np.integer)
+        if node_id_bound is not None and (isinstance(node_id_bound, bool)
+                                          or not isinstance(node_id_bound, int | np.integer)
                                           or not 1 <= node_id_bound <= 2**31):
             raise InputError("argument", "node_id_bound", f"{node_id_bound!r} is not an integer in [1, 2^31]",
                              "pass one more than the largest node id, or None")
@@ -559,8 +560,8 @@ class SpatialHash:
         dev = self.device
         n = entries
         keys = self.entry_key[:n]
-        wp.launch(kernels._mark_runs, dim=n, inputs=[keys, node_bits], outputs=[self.group_start[:n], self.cell_end[:n]],
-                  device=dev)
+        wp.launch(kernels._mark_runs, dim=n, inputs=[keys, node_bits],
+                  outputs=[self.group_start[:n], self.cell_end[:n]], device=dev)
         wp.utils.array_scan(self.group_start[:n], self.group_rank[:n], inclusive=True)
         wp.utils.array_scan(self.cell_end[:n], self.cell_rank[:n], inclusive=True)
         groups = int(self.group_rank[n - 1 : n].numpy()[0])

@@ -1,0 +1,257 @@
+"""The group slab test of SpatialHash: it only drops face pairs that are farther apart than the
+distance (checked with float64 ipctk distances), never a box pair that is closer, and it cuts the
+face tests between stacked layers."""
+
+from __future__ import annotations
+
+import ipctk
+import numpy as np
+import pytest
+import warp as wp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pscc.collision.detector import CollisionDetector
+from pscc.collision.spatial_hash import SpatialHash
+from pscc.errors import InputError
+from pscc.mesh import folded_sheet, grid_sheet
+from tests.collision.test_spatial_hash import _reference
+
+_SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+def _boxes(faces: np.ndarray, x0: np.ndarray, x1: np.ndarray | None, half: float) -> tuple[np.ndarray, np.ndarray]:
+    """Face boxes over the step grown by ``half`` (and a relative pad, like PrimitiveBoxes)."""
+    corners = x0[faces] if x1 is None else np.concatenate([x0[faces], x1[faces]], axis=1)
+    lower = corners.min(axis=1).astype(np.float64)
+    upper = corners.max(axis=1).astype(np.float64)
+    pad = half + 2.0**-21 * np.maximum(np.abs(lower), np.abs(upper)).max(axis=1, keepdims=True)
+    return (lower - pad).astype(np.float32), (upper + pad).astype(np.float32)
+
+
+def _find(faces, x0, x1, node, half, *, slab: bool, cell_size=None, **options):
+    device = "cpu"
+    hash_ = SpatialHash(faces.shape[0], device, faces=wp.array(faces, dtype=wp.vec3i, device=device),
+                        group_slab_test=slab, **options)
+    lower, upper = _boxes(faces, x0, x1, half)
+    hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device),
+                     wp.array(node, dtype=wp.int32, device=device), cell_size,
+                     positions_t0=wp.array(x0, dtype=wp.vec3, device=device),
+                     positions_t1=None if x1 is None else wp.array(x1, dtype=wp.vec3, device=device),
+                     half_distance=half)
+    return hash_.pairs_numpy(), hash_, lower, upper
+
+
+def _triangle_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Exact (float64) distance between triangles a and b, (3, 3) arrays each."""
+    a = a.astype(np.float64)
+    b = b.astype(np.float64)
+    for p, q in ((a, b), (b, a)):
+        for i in range(3):
+            if ipctk.is_edge_intersecting_triangle(p[i], p[(i + 1) % 3], q[0], q[1], q[2]):
+                return 0.0
+    best = np.inf
+    for p, q in ((a, b), (b, a)):
+        for i in range(3):
+            best = min(best, ipctk.point_triangle_distance(p[i], q[0], q[1], q[2]))
+    for i in range(3):
+        for j in range(3):
+            best = min(best, ipctk.edge_edge_distance(a[i], a[(i + 1) % 3], b[j], b[(j + 1) % 3]))
+    return float(np.sqrt(best))
+
+
+def _check_conservative(faces, x0, x1, node, half, **options) -> tuple[SpatialHash, int]:
+    """Slab-tested pairs = box pairs less some pairs, and each dropped pair is farther than 2 half
+    (at t0 and t1 and at sampled times in between for a step)."""
+    got, hash_, lower, upper = _find(faces, x0, x1, node, half, slab=True, **options)
+    boxes = _reference(lower, upper, np.asarray(node, dtype=np.int32))
+    got_set = {tuple(p) for p in got.tolist()}
+    box_set = {tuple(p) for p in boxes.tolist()}
+    assert got_set <= box_set
+    assert len(got_set) == got.shape[0]
+    times = [0.0] if x1 is None else np.linspace(0.0, 1.0, 9)
+    for a, b in box_set - got_set:
+        for t in times:
+            x = x0 if x1 is None else (1.0 - t) * x0.astype(np.float64) + t * x1.astype(np.float64)
+            distance = _triangle_distance(x[faces[a]], x[faces[b]])
+            assert distance > 2.0 * half * (1.0 - 1e-9), f"pair ({a}, {b}) at distance {distance} was dropped"
+    stats = hash_.stats
+    assert stats.bv_tests == stats.face_tests + stats.slab_tests
+    assert stats.same_node_tests == 0
+    return hash_, len(box_set - got_set)
+
+
+def _patch_nodes(rest: np.ndarray, faces: np.ndarray, patches: int, across: int | None = None) -> np.ndarray:
+    """A node id per face: a tiling of the rest (material) coordinates into ``patches`` along x and
+    ``across`` (default ``patches``) along y, like the front nodes of flat regions."""
+    across = patches if across is None else across
+    centre = rest[faces].mean(axis=1)
+    lo = centre.min(axis=0)
+    span = np.maximum(centre.max(axis=0) - lo, 1e-12)
+    tiles = np.array([patches, across])
+    cell = np.minimum((tiles * (centre[:, :2] - lo[:2]) / span[:2]).astype(np.int64), tiles - 1)
+    return (cell[:, 0] * across + cell[:, 1]).astype(np.int32)
+
+
+def _twist(points: np.ndarray, turns: float) -> np.ndarray:
+    x = points.astype(np.float64)
+    centre = x.mean(axis=0)
+    angle = 2.0 * np.pi * turns * (x[:, 0] - x[:, 0].min())
+    y, z = x[:, 1] - centre[1], x[:, 2] - centre[2]
+    out = x.copy()
+    out[:, 1] = centre[1] + np.cos(angle) * y - np.sin(angle) * z
+    out[:, 2] = centre[2] + np.sin(angle) * y + np.cos(angle) * z
+    return out.astype(np.float32)
+
+
+def _edge(x: np.ndarray, faces: np.ndarray) -> float:
+    return float(np.linalg.norm(x[faces[:, 0]] - x[faces[:, 1]], axis=1).mean())
+
+
+@pytest.mark.parametrize("turns", [0.0, 0.5])
+def test_twisted_layers_discrete(turns: float) -> None:
+    mesh = folded_sheet(1500, layers=3, seed=3)
+    x = _twist(mesh.vertices_end, turns)
+    half = 0.25 * _edge(x, mesh.faces)
+    # The node ids of a real normal cone test front on these positions.
+    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
+    detector.detect(x, thickness=2.0 * half)
+    node = detector.front.node_id.numpy()
+    slab, dropped = _check_conservative(mesh.faces, x, None, node, half)
+    assert dropped > 0 or not turns  # flat layers: the culled groups' boxes missed anyway
+    _, plain, _, _ = _find(mesh.faces, x, None, node, half, slab=False)
+    assert slab.stats.slab_tests > 0
+    assert plain.stats.slab_tests == 0
+    assert slab.stats.face_tests <= plain.stats.face_tests
+
+
+def test_slab_test_cuts_face_tests_between_twisted_layers() -> None:
+    # At this resolution a cell holds a nearly flat piece of each layer, two edges from the next.
+    mesh = folded_sheet(12000, layers=3, seed=0)
+    x = _twist(mesh.vertices_end, 0.5)
+    half = 0.25 * _edge(x, mesh.faces)
+    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
+    detector.detect(x, thickness=2.0 * half)
+    node = detector.front.node_id.numpy()
+    slab_pairs, slab, _, _ = _find(mesh.faces, x, None, node, half, slab=True)
+    plain_pairs, plain, _, _ = _find(mesh.faces, x, None, node, half, slab=False)
+    assert slab.stats.bv_tests < 0.5 * plain.stats.bv_tests
+    assert slab_pairs.shape[0] < plain_pairs.shape[0]
+    assert {tuple(p) for p in slab_pairs.tolist()} <= {tuple(p) for p in plain_pairs.tolist()}
+
+
+def test_twisted_layers_over_a_step() -> None:
+    mesh = folded_sheet(1200, layers=3, seed=5)
+    x0 = _twist(mesh.vertices, 0.5)
+    x1 = _twist(mesh.vertices_end, 0.51)
+    node = _patch_nodes(mesh.rest, mesh.faces, 5)
+    slab, dropped = _check_conservative(mesh.faces, x0, x1, node, 0.0)
+    assert slab.stats.slab_tests > 0 and dropped > 0
+
+
+def _two_sheets(gap: float, tilt: float, n: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two parallel n x n sheets ``gap`` apart, both rotated by ``tilt`` about the x axis."""
+    vertices, sheet_faces, _ = grid_sheet(n, n)
+    v = vertices.astype(np.float64)
+    top = v.copy()
+    top[:, 2] += gap
+    x = np.concatenate([v, top])
+    c, s = np.cos(tilt), np.sin(tilt)
+    rotated = x.copy()
+    rotated[:, 1] = c * x[:, 1] - s * x[:, 2]
+    rotated[:, 2] = s * x[:, 1] + c * x[:, 2]
+    faces = np.concatenate([sheet_faces, sheet_faces + v.shape[0]]).astype(np.int32)
+    node = np.repeat(np.arange(2, dtype=np.int32), sheet_faces.shape[0])
+    return faces, rotated.astype(np.float32), node
+
+
+def test_separated_tilted_sheets_need_no_face_test() -> None:
+    faces, x, node = _two_sheets(gap=0.15, tilt=0.785, n=4)
+    # One big cell: the two sheets share it, their boxes overlap, but their slabs are 0.15 apart.
+    got, hash_, lower, upper = _find(faces, x, None, node, 0.02, slab=True, cell_size=10.0)
+    assert _reference(lower, upper, node).shape[0] > 0
+    assert got.shape[0] == 0
+    assert hash_.stats.face_tests == 0
+    assert hash_.stats.slab_tests == 1
+
+
+@pytest.mark.parametrize("tilt", [0.0, 0.7])
+def test_sheets_exactly_at_the_distance_are_kept(tilt: float) -> None:
+    # gap = 2 half: every face of one sheet has a face of the other at exactly the distance.
+    half = 0.125
+    faces, x, node = _two_sheets(gap=2.0 * half, tilt=tilt)
+    got, _, lower, upper = _find(faces, x, None, node, half, slab=True, cell_size=10.0)
+    np.testing.assert_array_equal(got, _reference(lower, upper, node))
+    assert got.shape[0] > 0
+    # One percent farther apart, the slabs miss each other and no pair is left.
+    faces, x, node = _two_sheets(gap=2.0 * half * 1.01, tilt=tilt)
+    far, _, _, _ = _find(faces, x, None, node, half, slab=True, cell_size=10.0)
+    assert far.shape[0] == 0
+
+
+def test_sheet_passing_through_over_the_step_is_kept() -> None:
+    faces, x0, node = _two_sheets(gap=0.4, tilt=0.3)
+    x1 = x0.copy()
+    top = np.arange(x0.shape[0]) >= x0.shape[0] // 2
+    x1[top] = x0[top] - np.float32(0.8) * np.array([0.0, -np.sin(0.3), np.cos(0.3)], dtype=np.float32)
+    got, _, lower, upper = _find(faces, x0, x1, node, 0.0, slab=True, cell_size=10.0)
+    np.testing.assert_array_equal(got, _reference(lower, upper, node))
+    # Moving apart instead: culled.
+    x1[top] = x0[top] + np.float32(0.4) * np.array([0.0, -np.sin(0.3), np.cos(0.3)], dtype=np.float32)
+    apart, _, _, _ = _find(faces, x0, x1, node, 0.0, slab=True, cell_size=10.0)
+    assert apart.shape[0] == 0
+
+
+@_SETTINGS
+@given(seed=st.integers(0, 10_000), amplitude=st.floats(0.0, 0.3), patches=st.integers(1, 6),
+       factor=st.sampled_from([0.75, 1.5, 3.0]), swept=st.booleans(), min_work=st.sampled_from([1, 8]))
+def test_crumpled_sheets_never_lose_a_close_pair(seed, amplitude, patches, factor, swept, min_work) -> None:
+    rng = np.random.default_rng(seed)
+    vertices, sheet_faces, _ = grid_sheet(9, 9)
+    faces = sheet_faces.astype(np.int32)
+    x0 = vertices.astype(np.float64)
+    # Fold the sheet over itself and crumple it, so groups lie close in every direction.
+    x0[:, 2] = amplitude * np.sin(3.0 * x0[:, 0] + rng.uniform(0, 6)) + 0.1 * rng.standard_normal(x0.shape[0])
+    x0[:, 1] = np.where(x0[:, 1] > 0.5, 1.0 - x0[:, 1], x0[:, 1])
+    x0 = x0.astype(np.float32)
+    x1 = (x0 + 0.05 * rng.standard_normal(x0.shape)).astype(np.float32) if swept else None
+    node = _patch_nodes(vertices, faces, patches)
+    half = float(rng.choice([0.0, 0.01, 0.05]))
+    _check_conservative(faces, x0, x1, node, half, cell_size_factor=factor, slab_min_work=min_work)
+
+
+def test_deterministic_and_same_as_without_slabs_when_nothing_is_culled() -> None:
+    mesh = folded_sheet(800, layers=2, seed=1)
+    node = _patch_nodes(mesh.rest, mesh.faces, 4)
+    first, _, _, _ = _find(mesh.faces, mesh.vertices_end, None, node, 0.01, slab=True)
+    again, _, _, _ = _find(mesh.faces, mesh.vertices_end, None, node, 0.01, slab=True)
+    np.testing.assert_array_equal(first, again)
+    # A huge distance: every group pair passes, so the pairs are exactly the box pairs.
+    got, hash_, lower, upper = _find(mesh.faces, mesh.vertices_end, None, node, 5.0, slab=True)
+    np.testing.assert_array_equal(got, _reference(lower, upper, node))
+
+
+def test_bad_slab_arguments() -> None:
+    device = "cpu"
+    faces = np.array([[0, 1, 2], [3, 4, 5]], dtype=np.int32)
+    with pytest.raises(InputError, match="faces"):
+        SpatialHash(2, device, group_slab_test=True)
+    with pytest.raises(InputError, match="slab_min_work"):
+        SpatialHash(2, device, faces=wp.array(faces, dtype=wp.vec3i, device=device), slab_min_work=0)
+    hash_ = SpatialHash(2, device, faces=wp.array(faces, dtype=wp.vec3i, device=device), group_slab_test=True)
+    box = wp.array(np.zeros((2, 3), dtype=np.float32), dtype=wp.vec3, device=device)
+    node = wp.array(np.array([0, 1], dtype=np.int32), dtype=wp.int32, device=device)
+    with pytest.raises(InputError, match="positions_t0"):
+        hash_.find_pairs(box, box, node)
+    x = wp.array(np.zeros((6, 3), dtype=np.float32), dtype=wp.vec3, device=device)
+    with pytest.raises(InputError, match="half_distance"):
+        hash_.find_pairs(box, box, node, positions_t0=x, half_distance=-1.0)
+    with pytest.raises(InputError, match="positions_t1"):
+        hash_.find_pairs(box, box, node, positions_t0=x, positions_t1=wp.zeros(5, dtype=wp.vec3, device=device))
+    with pytest.raises(InputError, match="node_id"):
+        hash_.find_pairs(box, box, node, positions_t0=x, node_id_bound=1)
+    with pytest.raises(InputError, match="node_id_bound"):
+        hash_.find_pairs(box, box, node, positions_t0=x, node_id_bound=0)
+    # Without node ids every face is its own group: no slab test, no positions needed.
+    _, count = hash_.find_pairs(box, box)
+    assert count == 1 and hash_.stats.slab_tests == 0
