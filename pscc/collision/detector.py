@@ -224,8 +224,9 @@ class CollisionDetector:
         pair they could report. For ``pscc`` the test front is updated over the whole step.
 
         Returns:
-            Broad-phase stats: ``bv_tests``, ``box_pairs`` (hashed methods: triangle pairs whose boxes
-            overlap), ``triangle_pairs`` (after the supporting-plane test), ``self_triangle_pairs``,
+            Broad-phase stats: ``bv_tests``, ``box_pairs`` (hashed methods: the triangle pairs the
+            hash emits), ``triangle_pairs`` (those that give a feature pair: feature boxes overlap
+            and no supporting plane separates the triangles), ``self_triangle_pairs``,
             ``inter_triangle_pairs``, ``front_size``, ``candidate_pairs`` and ``seconds``.
 
         Raises:

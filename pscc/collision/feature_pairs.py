@@ -14,10 +14,13 @@ owned_vertex_bits         (face_count,) int32  bit k set: the face owns its vert
 owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge k (face_edges)
 ========================  ===================  ==============================================
 
-Before counting, each triangle pair meets the supporting-plane test of
-:mod:`pscc.collision.pair_filter` and is dropped when a plane separates its triangles.
-Extraction is count -> exclusive scan -> fill, so the output order depends only on the order of
-the triangle pairs.
+One thread per triangle pair first counts its feature pairs whose own boxes overlap; a pair with
+any then meets the supporting-plane test of :mod:`pscc.collision.pair_filter` (the costlier test,
+so it runs only where it can save narrow-phase work) and, unless a plane separates its triangles,
+appends its feature pairs to the candidate buffers with one atomic add per kind. A buffer that
+overflows is grown to the exact total and the pass runs again. The order of the candidates follows
+the atomic appends (fixed on the CPU, where the threads of a launch run in order); the detector
+sorts its results, so they do not depend on it.
 """
 
 from __future__ import annotations
@@ -114,8 +117,26 @@ class PlaneTestArgs:
     params: CcdParameters
 
 
+@wp.func
+def _edge_edge_count(face_edges: wp.array(dtype=wp.vec3i), edges: wp.array(dtype=wp.vec2i),
+                     owned_edge_bits: wp.array(dtype=wp.int32), boxes: PrimitiveBoxArgs, a: int, b: int) -> int:
+    """Edge pairs (owned by a, owned by b) that share no vertex and whose boxes overlap."""
+    count = int(0)
+    bits_a = owned_edge_bits[a]
+    bits_b = owned_edge_bits[b]
+    for j in range(3):
+        if (bits_a >> j) & 1:
+            for k in range(3):
+                if (bits_b >> k) & 1:
+                    ea = face_edges[a][j]
+                    eb = face_edges[b][k]
+                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
+                        count += 1
+    return count
+
+
 @wp.kernel
-def _count_features(
+def _extract_features(
     # in:
     faces: wp.array(dtype=wp.vec3i),
     face_edges: wp.array(dtype=wp.vec3i),
@@ -126,81 +147,49 @@ def _count_features(
     planes: PlaneTestArgs,
     boxes: PrimitiveBoxArgs,
     # out:
-    vertex_face_counts: wp.array(dtype=wp.int32),
-    edge_edge_counts: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    vertex_face_out: wp.array(dtype=wp.vec2i),
+    edge_edge_out: wp.array(dtype=wp.vec2i),
     pair_stats: wp.array(dtype=wp.int32),
 ):
-    """One thread per triangle pair: drop it when a supporting plane separates it, else count the
-    feature pairs it emits (and the kept pairs, all and within one object, in ``pair_stats``)."""
+    """One thread per triangle pair: count its feature pairs whose boxes overlap; if there are any and
+    no supporting plane separates the triangles, append them (written only below each buffer's
+    capacity; the counters keep counting) and count the pair as kept (all, and within one object,
+    in ``pair_stats``)."""
     i = wp.tid()
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
+    vf = _vertex_face_count(faces, owned_vertex_bits, boxes, a, b)
+    vf += _vertex_face_count(faces, owned_vertex_bits, boxes, b, a)
+    ee = _edge_edge_count(face_edges, edges, owned_edge_bits, boxes, a, b)
+    if vf + ee == 0:
+        return
     if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
                                planes.thickness, planes.factor, planes.params):
-        vertex_face_counts[i] = 0
-        edge_edge_counts[i] = 0
         return
     wp.atomic_add(pair_stats, 0, 1)
     if planes.object_ids[a] == planes.object_ids[b]:
         wp.atomic_add(pair_stats, 1, 1)
-    vf = _vertex_face_count(faces, owned_vertex_bits, boxes, a, b)
-    vf += _vertex_face_count(faces, owned_vertex_bits, boxes, b, a)
-    ee = int(0)
-    bits_a = owned_edge_bits[a]
-    bits_b = owned_edge_bits[b]
-    for j in range(3):
-        if (bits_a >> j) & 1:
-            for k in range(3):
-                if (bits_b >> k) & 1:
-                    ea = face_edges[a][j]
-                    eb = face_edges[b][k]
-                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
-                        ee += 1
-    vertex_face_counts[i] = vf
-    edge_edge_counts[i] = ee
-
-
-@wp.kernel
-def _fill_features(
-    # in:
-    faces: wp.array(dtype=wp.vec3i),
-    face_edges: wp.array(dtype=wp.vec3i),
-    edges: wp.array(dtype=wp.vec2i),
-    owned_vertex_bits: wp.array(dtype=wp.int32),
-    owned_edge_bits: wp.array(dtype=wp.int32),
-    triangle_pairs: wp.array(dtype=wp.vec2i),
-    boxes: PrimitiveBoxArgs,
-    vertex_face_offsets: wp.array(dtype=wp.int32),
-    edge_edge_offsets: wp.array(dtype=wp.int32),
-    # out:
-    vertex_face_out: wp.array(dtype=wp.vec2i),
-    edge_edge_out: wp.array(dtype=wp.vec2i),
-):
-    """One thread per triangle pair: write its feature pairs at its scanned offsets.
-
-    A pair that emits nothing (no feature pair, or separated by a supporting plane) is skipped."""
-    i = wp.tid()
-    if vertex_face_offsets[i + 1] == vertex_face_offsets[i] and edge_edge_offsets[i + 1] == edge_edge_offsets[i]:
-        return
-    pair = triangle_pairs[i]
-    a = pair[0]
-    b = pair[1]
-    slot = vertex_face_offsets[i]
-    slot += _vertex_face_fill(faces, owned_vertex_bits, boxes, a, b, slot, vertex_face_out)
-    _vertex_face_fill(faces, owned_vertex_bits, boxes, b, a, slot, vertex_face_out)
-    slot = edge_edge_offsets[i]
-    bits_a = owned_edge_bits[a]
-    bits_b = owned_edge_bits[b]
-    for j in range(3):
-        if (bits_a >> j) & 1:
-            for k in range(3):
-                if (bits_b >> k) & 1:
-                    ea = face_edges[a][j]
-                    eb = face_edges[b][k]
-                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
-                        edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
-                        slot += 1
+    if vf > 0:
+        slot = wp.atomic_add(counts, 0, vf)
+        if slot + vf <= vertex_face_out.shape[0]:
+            slot += _vertex_face_fill(faces, owned_vertex_bits, boxes, a, b, slot, vertex_face_out)
+            _vertex_face_fill(faces, owned_vertex_bits, boxes, b, a, slot, vertex_face_out)
+    if ee > 0:
+        slot = wp.atomic_add(counts, 1, ee)
+        if slot + ee <= edge_edge_out.shape[0]:
+            bits_a = owned_edge_bits[a]
+            bits_b = owned_edge_bits[b]
+            for j in range(3):
+                if (bits_a >> j) & 1:
+                    for k in range(3):
+                        if (bits_b >> k) & 1:
+                            ea = face_edges[a][j]
+                            eb = face_edges[b][k]
+                            if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
+                                edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
+                                slot += 1
 
 
 class FeaturePairs:
@@ -225,24 +214,19 @@ class FeaturePairs:
         self.face_edges = wp.array(topology.face_edges, dtype=wp.vec3i, device=device)
         self.faces = faces_device
         self.edges = edges_device
-        self._counts = [wp.empty(1, dtype=wp.int32, device=device) for _ in range(4)]
         self.pair_stats = wp.zeros(2, dtype=wp.int32, device=device)
         self.planes = PlaneTestArgs()
         self.planes.factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
         self.planes.params = ccd_parameters()
         self.kept_pairs = 0
         self.kept_self_pairs = 0
+        self.reruns = 0
 
     @property
     def device_bytes(self) -> int:
-        """Bytes held on the device (ownership tables and scratch)."""
+        """Bytes held on the device (ownership tables)."""
         return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity + self.face_edges.capacity
-                + sum(a.capacity for a in self._counts))
-
-    def _scratch(self, index: int, size: int) -> wp.array:
-        if self._counts[index].shape[0] < size:
-            self._counts[index] = wp.empty(int(1.25 * size) + 1024, dtype=wp.int32, device=self.device)
-        return self._counts[index]
+                + self.pair_stats.capacity)
 
     def extract(
         self,
@@ -256,53 +240,44 @@ class FeaturePairs:
         boxes: PrimitiveBoxArgs,
     ) -> None:
         """Write the feature pairs of the first ``pair_count`` triangle pairs into ``candidates``,
-        skipping pairs that a supporting plane separates (:mod:`pscc.collision.pair_filter`).
+        skipping feature pairs whose boxes miss and triangle pairs that a supporting plane separates
+        (:mod:`pscc.collision.pair_filter`).
 
         Args:
             triangle_pairs: candidate triangle pairs from a broad phase.
             pair_count: number of valid pairs.
-            candidates: output buffers (grown to the exact totals).
+            candidates: output buffers (grown to the exact totals when they overflow).
             positions_t0: positions (DCD) or start of the step (CCD).
             positions_t1: end of the step for CCD, else None.
             thickness: the distance the broad-phase boxes were grown by.
             object_ids: (face_count,) object of each face, for the self / inter pair counts.
             boxes: the primitive boxes of the same call; feature pairs whose boxes miss are skipped.
 
-        Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that passed.
-        Reads the totals to the host (a sync point) to size the output exactly.
-        Allocates: only when ``candidates`` or the scratch arrays must grow. Capture-safe: no.
+        Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that gave at least
+        one feature pair (boxes overlap, no separating supporting plane), and ``reruns`` the passes
+        repeated after a buffer grew. Reads the totals to the host (a sync point).
+        Allocates: only when ``candidates`` must grow. Capture-safe: no.
         """
         n = int(pair_count)
-        vf_counts = self._scratch(0, n + 1)
-        ee_counts = self._scratch(1, n + 1)
-        vf_offsets = self._scratch(2, n + 1)
-        ee_offsets = self._scratch(3, n + 1)
-        vf_counts.zero_()
-        ee_counts.zero_()
-        self.pair_stats.zero_()
         planes = self.planes
         planes.positions_t0 = positions_t0
         planes.positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
         planes.object_ids = object_ids
         planes.swept = 1 if positions_t1 is not None else 0
         planes.thickness = float(thickness)
-        if n > 0:
-            wp.launch(_count_features, dim=n, device=self.device,
-                      inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                              self.owned_edge_bits, triangle_pairs, planes, boxes],
-                      outputs=[vf_counts, ee_counts, self.pair_stats])
-        # Exclusive scan over n + 1 entries: the last offset is the total.
-        wp.utils.array_scan(vf_counts[: n + 1], vf_offsets[: n + 1], inclusive=False)
-        wp.utils.array_scan(ee_counts[: n + 1], ee_offsets[: n + 1], inclusive=False)
-        total_vf = int(vf_offsets[n : n + 1].numpy()[0])
-        total_ee = int(ee_offsets[n : n + 1].numpy()[0])
+        self.reruns = 0
+        while True:
+            candidates.reset()
+            self.pair_stats.zero_()
+            if n > 0:
+                wp.launch(_extract_features, dim=n, device=self.device,
+                          inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
+                                  self.owned_edge_bits, triangle_pairs, planes, boxes],
+                          outputs=[candidates.counts, candidates.vertex_face, candidates.edge_edge,
+                                   self.pair_stats])
+            if candidates.fits():
+                break
+            self.reruns += 1
         stats = self.pair_stats.numpy()
         self.kept_pairs = int(stats[0])
         self.kept_self_pairs = int(stats[1])
-        candidates.ensure(total_vf, total_ee)
-        if n > 0:
-            wp.launch(_fill_features, dim=n, device=self.device,
-                      inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                              self.owned_edge_bits, triangle_pairs, boxes, vf_offsets, ee_offsets],
-                      outputs=[candidates.vertex_face, candidates.edge_edge])
-        candidates.set_counts(total_vf, total_ee)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
-from pscc.collision.feature_pairs import FeaturePairs
+from pscc.collision.feature_pairs import FeaturePairs, ownership_bits
 from pscc.mesh import MeshTopology, grid_sheet
 
 
@@ -29,10 +29,29 @@ def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: st
     boxes.compute(x_device, x_device, thickness)
     extractor.extract(triangle_pairs, len(pairs), candidates, x_device, None, thickness,
                       wp.zeros(len(faces), dtype=wp.int32, device=device), boxes.as_struct())
-    assert extractor.kept_pairs == (len(pairs) if positions is None else extractor.kept_pairs)
+    if positions is None:
+        assert extractor.kept_pairs == _pairs_with_features(faces, topology, pairs)
+    assert extractor.kept_pairs <= len(pairs)
     vf = candidates.vertex_face.numpy()[: candidates.vertex_face_count].reshape(-1, 2)
     ee = candidates.edge_edge.numpy()[: candidates.edge_edge_count].reshape(-1, 2)
     return topology, vf, ee
+
+
+def _pairs_with_features(faces: np.ndarray, topology: MeshTopology, pairs: np.ndarray) -> int:
+    """Triangle pairs that own at least one vertex-face or edge-edge pair sharing no vertex (every
+    such pair is kept when all boxes overlap and no plane separates)."""
+    vertex_bits, edge_bits = ownership_bits(faces, topology)
+    kept = 0
+    for a, b in pairs.reshape(-1, 2):
+        found = any((vertex_bits[p] >> k) & 1 and faces[p][k] not in faces[q]
+                    for p, q in ((a, b), (b, a)) for k in range(3))
+        for j in range(3):
+            for k in range(3):
+                if (edge_bits[a] >> j) & 1 and (edge_bits[b] >> k) & 1:
+                    ea, eb = topology.edges[topology.face_edges[a][j]], topology.edges[topology.face_edges[b][k]]
+                    found = found or not set(ea.tolist()) & set(eb.tolist())
+        kept += int(found)
+    return kept
 
 
 def _all_pairs(face_count: int) -> np.ndarray:
