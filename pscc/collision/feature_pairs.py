@@ -59,49 +59,28 @@ def _shares_vertex(f: wp.vec3i, v: int) -> bool:
 
 
 @wp.func
-def _edges_share_vertex(a: wp.vec2i, b: wp.vec2i) -> bool:
-    return a[0] == b[0] or a[0] == b[1] or a[1] == b[0] or a[1] == b[1]
-
-
-@wp.func
-def _vertex_face_near(boxes: PrimitiveBoxArgs, v: int, f: int) -> bool:
-    return boxes_overlap(boxes.vertex_lower[v], boxes.vertex_upper[v], boxes.face_lower[f], boxes.face_upper[f])
-
-
-@wp.func
-def _edge_edge_near(boxes: PrimitiveBoxArgs, a: int, b: int) -> bool:
-    return boxes_overlap(boxes.edge_lower[a], boxes.edge_upper[a], boxes.edge_lower[b], boxes.edge_upper[b])
-
-
-@wp.func
-def _vertex_face_count(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
+def _owned_vertex_mask(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
                        boxes: PrimitiveBoxArgs, owner: int, other: int) -> int:
-    """Vertices owned by face ``owner`` that do not belong to face ``other``."""
+    """Bit k: vertex k of face ``owner`` is owned by it, is not a vertex of face ``other``, and its box
+    overlaps the box of ``other``."""
     tri = faces[owner]
     target = faces[other]
     bits = owned_vertex_bits[owner]
-    count = int(0)
+    other_lower = boxes.face_lower[other]
+    other_upper = boxes.face_upper[other]
+    mask = int(0)
     for k in range(3):
         if (bits >> k) & 1:
-            if not _shares_vertex(target, tri[k]) and _vertex_face_near(boxes, tri[k], other):
-                count += 1
-    return count
+            v = tri[k]
+            if not _shares_vertex(target, v):
+                if boxes_overlap(boxes.vertex_lower[v], boxes.vertex_upper[v], other_lower, other_upper):
+                    mask = mask | (1 << k)
+    return mask
 
 
 @wp.func
-def _vertex_face_fill(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
-                      boxes: PrimitiveBoxArgs, owner: int, other: int, slot: int, out: wp.array(dtype=wp.vec2i)) -> int:
-    """Write (vertex, other) for the vertices counted by :func:`_vertex_face_count`; return the count."""
-    tri = faces[owner]
-    target = faces[other]
-    bits = owned_vertex_bits[owner]
-    count = int(0)
-    for k in range(3):
-        if (bits >> k) & 1:
-            if not _shares_vertex(target, tri[k]) and _vertex_face_near(boxes, tri[k], other):
-                out[slot + count] = wp.vec2i(tri[k], other)
-                count += 1
-    return count
+def _bit_count3(mask: int) -> int:
+    return (mask & 1) + ((mask >> 1) & 1) + ((mask >> 2) & 1)
 
 
 @wp.struct
@@ -115,24 +94,6 @@ class PlaneTestArgs:
     thickness: wp.float32
     factor: wp.float32
     params: CcdParameters
-
-
-@wp.func
-def _edge_edge_count(face_edges: wp.array(dtype=wp.vec3i), edges: wp.array(dtype=wp.vec2i),
-                     owned_edge_bits: wp.array(dtype=wp.int32), boxes: PrimitiveBoxArgs, a: int, b: int) -> int:
-    """Edge pairs (owned by a, owned by b) that share no vertex and whose boxes overlap."""
-    count = int(0)
-    bits_a = owned_edge_bits[a]
-    bits_b = owned_edge_bits[b]
-    for j in range(3):
-        if (bits_a >> j) & 1:
-            for k in range(3):
-                if (bits_b >> k) & 1:
-                    ea = face_edges[a][j]
-                    eb = face_edges[b][k]
-                    if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
-                        count += 1
-    return count
 
 
 @wp.kernel
@@ -152,17 +113,50 @@ def _extract_features(
     edge_edge_out: wp.array(dtype=wp.vec2i),
     pair_stats: wp.array(dtype=wp.int32),
 ):
-    """One thread per triangle pair: count its feature pairs whose boxes overlap; if there are any and
-    no supporting plane separates the triangles, append them (written only below each buffer's
-    capacity; the counters keep counting) and count the pair as kept (all, and within one object,
-    in ``pair_stats``)."""
+    """One thread per triangle pair: find its feature pairs whose boxes overlap (as bit masks, each
+    box loaded once); if there are any and no supporting plane separates the triangles, append them
+    (written only below each buffer's capacity; the counters keep counting) and count the pair as
+    kept (all, and within one object, in ``pair_stats``)."""
     i = wp.tid()
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
-    vf = _vertex_face_count(faces, owned_vertex_bits, boxes, a, b)
-    vf += _vertex_face_count(faces, owned_vertex_bits, boxes, b, a)
-    ee = _edge_edge_count(face_edges, edges, owned_edge_bits, boxes, a, b)
+    mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, a, b)
+    mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, b, a)
+    vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
+    # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests.
+    bits_a = owned_edge_bits[a]
+    bits_b = owned_edge_bits[b]
+    ids_a = face_edges[a]
+    ids_b = face_edges[b]
+    lower_b = wp.mat33(0.0)
+    upper_b = wp.mat33(0.0)
+    ends_b0 = wp.vec3i(-1, -1, -1)
+    ends_b1 = wp.vec3i(-1, -1, -1)
+    for k in range(3):
+        if (bits_b >> k) & 1:
+            eb = ids_b[k]
+            ends = edges[eb]
+            ends_b0[k] = ends[0]
+            ends_b1[k] = ends[1]
+            lower_b[k] = boxes.edge_lower[eb]
+            upper_b[k] = boxes.edge_upper[eb]
+    edge_mask = int(0)
+    for j in range(3):
+        if (bits_a >> j) & 1:
+            ea = ids_a[j]
+            ends_a = edges[ea]
+            lower_a = boxes.edge_lower[ea]
+            upper_a = boxes.edge_upper[ea]
+            for k in range(3):
+                if (bits_b >> k) & 1:
+                    shared = (ends_a[0] == ends_b0[k] or ends_a[0] == ends_b1[k] or ends_a[1] == ends_b0[k]
+                              or ends_a[1] == ends_b1[k])
+                    if not shared and boxes_overlap(lower_a, upper_a, lower_b[k], upper_b[k]):
+                        edge_mask = edge_mask | (1 << (3 * j + k))
+    ee = int(0)
+    for t in range(9):
+        ee += (edge_mask >> t) & 1
     if vf + ee == 0:
         return
     if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
@@ -174,22 +168,26 @@ def _extract_features(
     if vf > 0:
         slot = wp.atomic_add(counts, 0, vf)
         if slot + vf <= vertex_face_out.shape[0]:
-            slot += _vertex_face_fill(faces, owned_vertex_bits, boxes, a, b, slot, vertex_face_out)
-            _vertex_face_fill(faces, owned_vertex_bits, boxes, b, a, slot, vertex_face_out)
+            tri_a = faces[a]
+            tri_b = faces[b]
+            for k in range(3):
+                if (mask_ab >> k) & 1:
+                    vertex_face_out[slot] = wp.vec2i(tri_a[k], b)
+                    slot += 1
+            for k in range(3):
+                if (mask_ba >> k) & 1:
+                    vertex_face_out[slot] = wp.vec2i(tri_b[k], a)
+                    slot += 1
     if ee > 0:
         slot = wp.atomic_add(counts, 1, ee)
         if slot + ee <= edge_edge_out.shape[0]:
-            bits_a = owned_edge_bits[a]
-            bits_b = owned_edge_bits[b]
             for j in range(3):
-                if (bits_a >> j) & 1:
-                    for k in range(3):
-                        if (bits_b >> k) & 1:
-                            ea = face_edges[a][j]
-                            eb = face_edges[b][k]
-                            if not _edges_share_vertex(edges[ea], edges[eb]) and _edge_edge_near(boxes, ea, eb):
-                                edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
-                                slot += 1
+                for k in range(3):
+                    if (edge_mask >> (3 * j + k)) & 1:
+                        ea = ids_a[j]
+                        eb = ids_b[k]
+                        edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
+                        slot += 1
 
 
 class FeaturePairs:
