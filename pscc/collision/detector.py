@@ -224,10 +224,11 @@ class CollisionDetector:
         pair they could report. For ``pscc`` the test front is updated over the whole step.
 
         Returns:
-            Broad-phase stats: ``bv_tests``, ``box_pairs`` (hashed methods: the triangle pairs the
-            hash emits), ``triangle_pairs`` (those that give a feature pair: feature boxes overlap
-            and no supporting plane separates the triangles), ``self_triangle_pairs``,
-            ``inter_triangle_pairs``, ``front_size``, ``candidate_pairs`` and ``seconds``.
+            Broad-phase stats: ``bv_tests``, ``triangle_pairs`` (the triangle pairs the broad phase
+            outputs: all pairs for brute force, the hash's pairs otherwise), ``self_triangle_pairs``,
+            ``inter_triangle_pairs``, ``kept_triangle_pairs`` (hashed methods: those that give a
+            feature pair whose boxes overlap and that no supporting plane separates),
+            ``front_size``, ``candidate_pairs`` and ``seconds``.
 
         Raises:
             InputError: bad positions or thickness.
@@ -281,12 +282,12 @@ class CollisionDetector:
             mark = time.perf_counter()
             self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
                                        self._object_ids, self._feature_boxes)
-            count = self.feature_pairs.kept_pairs
-            self_pairs = self.feature_pairs.kept_self_pairs
+            self_pairs = self.feature_pairs.self_pairs
             seconds["feature_pairs"] = time.perf_counter() - mark
             hash_stats = self.spatial_hash.stats
-            stats.update(bv_tests=int(hash_stats.bv_tests), box_pairs=int(box_pairs), triangle_pairs=int(count),
-                         self_triangle_pairs=self_pairs, inter_triangle_pairs=int(count) - self_pairs,
+            stats.update(bv_tests=int(hash_stats.bv_tests), triangle_pairs=int(box_pairs),
+                         self_triangle_pairs=self_pairs, inter_triangle_pairs=int(box_pairs) - self_pairs,
+                         kept_triangle_pairs=self.feature_pairs.kept_pairs,
                          grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
                                "face_tests": int(hash_stats.face_tests), "slab_tests": int(hash_stats.slab_tests),

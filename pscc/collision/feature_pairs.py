@@ -116,11 +116,14 @@ def _extract_features(
     """One thread per triangle pair: find its feature pairs whose boxes overlap (as bit masks, each
     box loaded once); if there are any and no supporting plane separates the triangles, append them
     (written only below each buffer's capacity; the counters keep counting) and count the pair as
-    kept (all, and within one object, in ``pair_stats``)."""
+    kept. ``pair_stats`` = [kept, kept within one object, all pairs within one object]."""
     i = wp.tid()
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
+    same_object = planes.object_ids[a] == planes.object_ids[b]
+    if same_object:
+        wp.atomic_add(pair_stats, 2, 1)
     mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, a, b)
     mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, b, a)
     vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
@@ -163,7 +166,7 @@ def _extract_features(
                                planes.thickness, planes.factor, planes.params):
         return
     wp.atomic_add(pair_stats, 0, 1)
-    if planes.object_ids[a] == planes.object_ids[b]:
+    if same_object:
         wp.atomic_add(pair_stats, 1, 1)
     if vf > 0:
         slot = wp.atomic_add(counts, 0, vf)
@@ -212,12 +215,13 @@ class FeaturePairs:
         self.face_edges = wp.array(topology.face_edges, dtype=wp.vec3i, device=device)
         self.faces = faces_device
         self.edges = edges_device
-        self.pair_stats = wp.zeros(2, dtype=wp.int32, device=device)
+        self.pair_stats = wp.zeros(3, dtype=wp.int32, device=device)
         self.planes = PlaneTestArgs()
         self.planes.factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
         self.planes.params = ccd_parameters()
         self.kept_pairs = 0
         self.kept_self_pairs = 0
+        self.self_pairs = 0
         self.reruns = 0
 
     @property
@@ -252,8 +256,9 @@ class FeaturePairs:
             boxes: the primitive boxes of the same call; feature pairs whose boxes miss are skipped.
 
         Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that gave at least
-        one feature pair (boxes overlap, no separating supporting plane), and ``reruns`` the passes
-        repeated after a buffer grew. Reads the totals to the host (a sync point).
+        one feature pair (boxes overlap, no separating supporting plane), all and within one object,
+        ``self_pairs`` the given pairs within one object, and ``reruns`` the passes repeated after a
+        buffer grew. Reads the totals to the host (a sync point).
         Allocates: only when ``candidates`` must grow. Capture-safe: no.
         """
         n = int(pair_count)
@@ -279,3 +284,4 @@ class FeaturePairs:
         stats = self.pair_stats.numpy()
         self.kept_pairs = int(stats[0])
         self.kept_self_pairs = int(stats[1])
+        self.self_pairs = int(stats[2])
