@@ -233,9 +233,13 @@ class SpatialHash:
         self.tests_per_launch = tests_per_launch
         self.skip_adjacent = bool(skip_adjacent)
         m = self.face_count
+        self._vertex_bound = 0
         if faces is not None:
             self._check_array(faces, "faces", wp.vec3i)
             self.faces = faces
+            if self.group_slab_test and m > 0:
+                # The slab test reads positions[faces]: one host read here lets every call check them.
+                self._vertex_bound = int(faces.numpy().max()) + 1
         elif self.skip_adjacent or self.group_slab_test:
             option = "skip_adjacent" if self.skip_adjacent else "group_slab_test"
             raise InputError("argument", "faces", f"{option}=True needs the faces' vertex ids",
@@ -450,6 +454,9 @@ class SpatialHash:
             if value.device != self.device:
                 raise InputError("argument", name, f"array is on {value.device}, the hash on {self.device}",
                                  f"copy it to {self.device} first")
+        if positions_t0.shape[0] < self._vertex_bound:
+            raise InputError("argument", "positions_t0", f"{positions_t0.shape[0]} positions, but the faces use "
+                             f"{self._vertex_bound} vertices", "pass a position for every vertex the faces use")
         if positions_t1 is not None and positions_t1.shape != positions_t0.shape:
             raise InputError("argument", "positions_t1", f"shape {positions_t1.shape} != positions_t0's "
                              f"{positions_t0.shape}", "pass both ends of the step for the same vertices")

@@ -248,6 +248,8 @@ def test_bad_slab_arguments() -> None:
         hash_.find_pairs(box, box, node, positions_t0=x, half_distance=-1.0)
     with pytest.raises(InputError, match="positions_t1"):
         hash_.find_pairs(box, box, node, positions_t0=x, positions_t1=wp.zeros(5, dtype=wp.vec3, device=device))
+    with pytest.raises(InputError, match="positions_t0"):
+        hash_.find_pairs(box, box, node, positions_t0=wp.zeros(5, dtype=wp.vec3, device=device))
     with pytest.raises(InputError, match="node_id"):
         hash_.find_pairs(box, box, node, positions_t0=x, node_id_bound=1)
     with pytest.raises(InputError, match="node_id_bound"):
