@@ -190,19 +190,25 @@ def _count_face_cells(
     cell_size: float,
     node_id: wp.array(dtype=wp.int32),
     node_limit: int,
+    face_order: wp.array(dtype=wp.int32),
+    ordered: int,
     # out:
     face_cells: wp.array(dtype=wp.int64),
     grid_max: wp.array(dtype=wp.int32),
 ):
-    """One thread per face; grid_max[3] counts node ids outside [0, node_limit) (when node_limit > 0)."""
-    f = wp.tid()
+    """One thread per face position k (face ``face_order[k]`` when ``ordered``, else face k): its cell
+    count goes to slot k; grid_max[3] counts node ids outside [0, node_limit) (when node_limit > 0)."""
+    k = wp.tid()
+    f = k
+    if ordered != 0:
+        f = face_order[k]
     if node_limit > 0:
         node = node_id[f]
         if node < 0 or node >= node_limit:
             wp.atomic_add(grid_max, 3, 1)
     lo = cell_of_point(face_lower[f], origin, cell_size)
     hi = cell_of_point(face_upper[f], origin, cell_size)
-    face_cells[f] = wp.int64(hi[0] - lo[0] + 1) * wp.int64(hi[1] - lo[1] + 1) * wp.int64(hi[2] - lo[2] + 1)
+    face_cells[k] = wp.int64(hi[0] - lo[0] + 1) * wp.int64(hi[1] - lo[1] + 1) * wp.int64(hi[2] - lo[2] + 1)
     wp.atomic_max(grid_max, 0, hi[0])
     wp.atomic_max(grid_max, 1, hi[1])
     wp.atomic_max(grid_max, 2, hi[2])
@@ -232,16 +238,22 @@ def _fill_entries(
     face_cells: wp.array(dtype=wp.int64),
     face_end: wp.array(dtype=wp.int64),
     grid: GridArgs,
+    face_order: wp.array(dtype=wp.int32),
+    ordered: int,
     # out:
     keys: wp.array(dtype=wp.int64),
     faces: wp.array(dtype=wp.int32),
 ):
-    """One thread per face: writes its entries at its slot of the exclusive scan of cell counts."""
-    f = wp.tid()
+    """One thread per face position k (as in ``_count_face_cells``): writes the face's entries at slot
+    k of the exclusive scan of cell counts, so entries lie in face-position order."""
+    k = wp.tid()
+    f = k
+    if ordered != 0:
+        f = face_order[k]
     lo = cell_of_point(face_lower[f], grid.origin, grid.cell_size)
     hi = cell_of_point(face_upper[f], grid.origin, grid.cell_size)
     node = node_id[f]
-    slot = int(face_end[f] - face_cells[f])
+    slot = int(face_end[k] - face_cells[k])
     for x in range(lo[0], hi[0] + 1):
         for y in range(lo[1], hi[1] + 1):
             for z in range(lo[2], hi[2] + 1):

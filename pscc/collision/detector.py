@@ -277,7 +277,8 @@ class CollisionDetector:
             pairs, box_pairs = self.spatial_hash.find_pairs(
                 self.boxes.face_lower, self.boxes.face_upper, node_id,
                 positions_t0=self._positions_t0, positions_t1=x1_device, half_distance=0.5 * h,
-                node_id_bound=self.bvh.node_count if node_id is not None else None)
+                node_id_bound=self.bvh.node_count if node_id is not None else None,
+                face_order=self.bvh.arrays.face_order if node_id is not None else None)
             seconds["spatial_hash"] = time.perf_counter() - mark
             mark = time.perf_counter()
             self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,

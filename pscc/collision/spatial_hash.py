@@ -351,6 +351,7 @@ class SpatialHash:
         positions_t1: wp.array | None = None,
         half_distance: float = 0.0,
         node_id_bound: int | None = None,
+        face_order: wp.array | None = None,
     ) -> tuple[wp.array, int]:
         """All face pairs (a < b) whose closed boxes overlap and whose node ids differ (with the
         group slab test: less the pairs of groups separated along a group axis, none of which is
@@ -374,6 +375,12 @@ class SpatialHash:
             node_id_bound: every node id lies in [0, node_id_bound): the keys then need only
                 bit_length(node_id_bound - 1) node bits, and the sort fewer passes (``None``: any
                 int32 ids, 32 bits). Checked on the device.
+            face_order: (face_count,) ``wp.int32`` permutation of the faces in which faces with
+                equal node ids are contiguous (for PSCC the BVH's face order: every front node is
+                a range of it). Entries are then laid out in this order, so after a stable sort on
+                the cell bits alone the faces of a node stay together in each cell: the sort skips
+                the node bits. Checked to be a permutation once per array; a grouping it breaks is
+                caught by the same-node counter.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
@@ -381,7 +388,7 @@ class SpatialHash:
 
         Raises:
             InputError: wrong array, non-finite or inverted box, bad cell size, a node id outside
-                [0, node_id_bound).
+                [0, node_id_bound), a ``face_order`` that is no permutation or splits a node.
             CapacityError: more entries or pairs than int32 indexing allows.
 
         Allocates: when a buffer grows. Capture-safe: no.
@@ -400,6 +407,8 @@ class SpatialHash:
                              "pass one more than the largest node id, or None")
         if cell_size is not None:
             cell_size = _check_positive(cell_size, "cell_size")
+        if face_order is not None:
+            self._check_face_order(face_order)
         slab = self._slab_args(node_id is not self.own_node_id, positions_t0, positions_t1, half_distance)
         self.stats = SpatialHashStats()
         self._pair_count = 0
@@ -420,14 +429,34 @@ class SpatialHash:
         grid.origin = wp.vec3(*origin)
         grid.node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
-        entries = self._insert_faces(face_lower, face_upper, node_id, node_limit, grid, cell_size, extent)
+        # Faces in node-contiguous order (own ids: face order; else the given order) need only the cell bits sorted.
+        grouped_fill = node_id is self.own_node_id or face_order is not None
+        order = self.own_node_id if face_order is None else face_order
+        entries = self._insert_faces(face_lower, face_upper, node_id, node_limit, grid, cell_size, extent, order,
+                                     face_order is not None, grouped_fill)
         self._build_tables(entries, grid.node_bits, slab)
         self._test_pairs(face_lower, face_upper, grid)
+        if face_order is not None and self.stats.same_node_tests > 0:
+            raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
+                             "pass an order in which equal node ids are adjacent, or None")
         if self.sort_pairs:
             self._sort_pairs()
         self.stats.mean_cells_per_face = entries / self.face_count
         self.stats.device_bytes = self.device_bytes
         return self.pairs[: self._pair_count], self._pair_count
+
+    def _check_face_order(self, face_order: wp.array) -> None:
+        """Shape and dtype on every call; that it is a permutation once per array (one host read)."""
+        self._check_array(face_order, "face_order", wp.int32)
+        key = (face_order.ptr, face_order.shape[0])
+        if key == getattr(self, "_checked_order", None):
+            return
+        order = face_order.numpy()
+        if order.shape[0] and (order.min() < 0 or order.max() >= self.face_count
+                               or np.bincount(order, minlength=self.face_count).max() != 1):
+            raise InputError("argument", "face_order", "is not a permutation of the faces",
+                             "pass each face id exactly once")
+        self._checked_order = key
 
     def _slab_args(self, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
                    half_distance: float) -> kernels.SlabArgs:
@@ -513,7 +542,8 @@ class SpatialHash:
 
     def _insert_faces(
         self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_limit: int,
-        grid: kernels.GridArgs, cell_size: float, extent: np.ndarray,
+        grid: kernels.GridArgs, cell_size: float, extent: np.ndarray, order: wp.array, ordered: bool,
+        grouped_fill: bool,
     ) -> int:
         """Count, scan and fill the (key, face) entries, then sort them. Sync point 2.
 
@@ -531,7 +561,8 @@ class SpatialHash:
                 continue
             self.grid_max.zero_()
             wp.launch(kernels._count_face_cells, dim=m,
-                      inputs=[face_lower, face_upper, grid.origin, cell_size, node_id, node_limit],
+                      inputs=[face_lower, face_upper, grid.origin, cell_size, node_id, node_limit, order,
+                              int(ordered)],
                       outputs=[self.face_cells, self.grid_max], device=dev)
             wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
             wp.launch(kernels._gather_entry_info, dim=1, inputs=[self.face_end, self.grid_max],
@@ -555,10 +586,13 @@ class SpatialHash:
         if entries > self.entry_capacity:
             self._allocate_entries(min(MAX_ENTRIES, int(entries * _GROWTH)))
         wp.launch(kernels._fill_entries, dim=m,
-                  inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, grid],
+                  inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, grid, order, int(ordered)],
                   outputs=[self.entry_key, self.entry_face], device=dev)
         cell_bits = max(1, (math.prod(dims) - 1).bit_length())
-        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, 0, grid.node_bits + cell_bits)
+        # A stable sort on the cell bits keeps the fill order inside each cell; when that order keeps
+        # each node's faces together, the node bits need no sorting.
+        first_bit = grid.node_bits if grouped_fill else 0
+        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, first_bit, grid.node_bits + cell_bits)
         return entries
 
     def _build_tables(self, entries: int, node_bits: int, slab: kernels.SlabArgs) -> None:

@@ -257,3 +257,55 @@ def test_bad_slab_arguments() -> None:
     # Without node ids every face is its own group: no slab test, no positions needed.
     _, count = hash_.find_pairs(box, box)
     assert count == 1 and hash_.stats.slab_tests == 0
+
+
+def test_face_order_gives_the_same_pairs_with_a_shorter_sort() -> None:
+    mesh = folded_sheet(1500, layers=3, seed=4)
+    x = _twist(mesh.vertices_end, 0.3)
+    half = 0.25 * _edge(x, mesh.faces)
+    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
+    detector.detect(x, thickness=2.0 * half)
+    node = detector.front.node_id.numpy()
+    order = wp.array(detector.bvh.face_order.astype(np.int32), dtype=wp.int32, device="cpu")
+    device = "cpu"
+    lower, upper = _boxes(mesh.faces, x, None, half)
+    box_pairs = _reference(lower, upper, node)
+
+    def run(slab: bool, face_order):
+        hash_ = SpatialHash(mesh.face_count, device, faces=wp.array(mesh.faces, dtype=wp.vec3i, device=device),
+                            group_slab_test=slab)
+        hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device),
+                         wp.array(node, dtype=wp.int32, device=device),
+                         positions_t0=wp.array(x, dtype=wp.vec3, device=device), half_distance=half,
+                         node_id_bound=detector.bvh.node_count, face_order=face_order)
+        assert hash_.stats.same_node_tests == 0
+        return hash_.pairs_numpy(), hash_.stats
+
+    # Without the slab test the pairs are the box pairs whatever the entry order, with the same tests.
+    plain, plain_stats = run(False, None)
+    ordered, ordered_stats = run(False, order)
+    np.testing.assert_array_equal(plain, box_pairs)
+    np.testing.assert_array_equal(ordered, box_pairs)
+    assert (ordered_stats.groups, ordered_stats.bv_tests) == (plain_stats.groups, plain_stats.bv_tests)
+    # With it, the group axes (middle faces) follow the order; every dropped pair is still far apart.
+    slabbed, _ = run(True, order)
+    got = {tuple(p) for p in slabbed.tolist()}
+    boxes = {tuple(p) for p in box_pairs.tolist()}
+    assert got <= boxes
+    for a, b in boxes - got:
+        assert _triangle_distance(x[mesh.faces[a]], x[mesh.faces[b]]) > 2.0 * half * (1.0 - 1e-9)
+
+
+def test_bad_face_order() -> None:
+    device = "cpu"
+    faces = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]], dtype=np.int32)
+    hash_ = SpatialHash(3, device)
+    box = wp.array(np.zeros((3, 3), dtype=np.float32), dtype=wp.vec3, device=device)
+    with pytest.raises(InputError, match="permutation"):
+        hash_.find_pairs(box, box, wp.array(np.array([0, 1, 2], dtype=np.int32), device=device),
+                         face_order=wp.array(np.array([0, 0, 2], dtype=np.int32), device=device))
+    # Node 0 split by face 1 (node 1): the same-node counter catches it.
+    with pytest.raises(InputError, match="contiguous"):
+        hash_.find_pairs(box, box, wp.array(np.array([0, 1, 0], dtype=np.int32), device=device),
+                         face_order=wp.array(np.array([0, 1, 2], dtype=np.int32), device=device))
+    del faces
