@@ -137,6 +137,9 @@ class CollisionDetector:
         self._vertex_count = vertex_count
         self.object_ids = mesh.object_ids
         self.topology = MeshTopology.from_faces(mesh.faces, vertex_count)
+        # Edge end points as two flat arrays: 1-D gathers are what the output stage does most.
+        self._edge_first = np.ascontiguousarray(self.topology.edges[:, 0], dtype=np.int32)
+        self._edge_second = np.ascontiguousarray(self.topology.edges[:, 1], dtype=np.int32)
         device = self.device
         self._faces = wp.array(mesh.faces, dtype=wp.vec3i, device=device)
         self._edges = wp.array(self.topology.edges, dtype=wp.vec2i, device=device)
@@ -428,10 +431,13 @@ class CollisionDetector:
         vertex_face = np.empty((vf_key.shape[0], 2), dtype=np.int32)
         vertex_face[:, 0] = vf_key // m
         vertex_face[:, 1] = vf_key % m
-        edges = self.topology.edges
+        edge_a = ee_key // edge_count
+        edge_b = ee_key - edge_a * edge_count
         edge_edge = np.empty((ee_key.shape[0], 4), dtype=np.int32)
-        edge_edge[:, 0:2] = edges[ee_key // edge_count]
-        edge_edge[:, 2:4] = edges[ee_key % edge_count]
+        edge_edge[:, 0] = self._edge_first[edge_a]
+        edge_edge[:, 1] = self._edge_second[edge_a]
+        edge_edge[:, 2] = self._edge_first[edge_b]
+        edge_edge[:, 3] = self._edge_second[edge_b]
         return CollisionResult(
             vertex_face=vertex_face,
             edge_edge=edge_edge,
