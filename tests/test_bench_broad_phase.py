@@ -1,0 +1,70 @@
+"""The broad-phase benchmark section on a small scene, with a stand-in for Newton's detector."""
+
+from __future__ import annotations
+
+import time
+
+from pscc.bench import broad_phase
+
+
+class _FakeNewton:
+    """Takes a fixed time per call, so the paired ratios are known to within the timer's noise."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.calls = 0
+
+    def run(self) -> None:
+        self.calls += 1
+        time.sleep(self.seconds)
+
+    def row(self, seconds: float) -> dict:
+        return {"method": "newton", "mode": "dcd", "seconds": seconds, "radius": 0.0,
+                "vertex_face_pairs": 0, "edge_edge_pairs": 0, "overflow": False}
+
+
+class _Result:
+    stats = {"seconds": {"setup": 0.0, "spatial_hash": 0.001, "output": 0.001, "total": 0.002}}
+
+
+def test_paired_medians_alternate_and_ratio_each_pair() -> None:
+    order = []
+
+    def run():
+        order.append("a")
+        time.sleep(0.01)
+        return _Result()
+
+    def other():
+        order.append("b")
+        time.sleep(0.04)
+
+    seconds, result, other_seconds, ratio, device_ratio = broad_phase._paired_medians(run, other, 3)
+    assert order == ["a", "b"] * 4
+    assert isinstance(result, _Result)
+    assert 0.01 <= seconds < other_seconds
+    assert 0.1 < ratio < 0.6  # 10 ms against 40 ms, with sleep jitter
+    assert abs(device_ratio - 0.001 / other_seconds) < 0.01
+
+
+def test_bench_methods_and_report_on_a_small_scene() -> None:
+    mesh = broad_phase.SCENES["twisted"](600)
+    newton = _FakeNewton(0.05)
+    rows = broad_phase.bench_methods(mesh, "cpu", repeats=2, newton=newton)
+    assert newton.calls == 3  # one warm-up call and one per repeat, alternating with pscc's DCD
+    methods = [(r["method"], r["mode"]) for r in rows]
+    assert methods == [("spatial-hash", "ccd"), ("spatial-hash", "dcd"), ("pscc", "ccd"), ("pscc", "dcd"),
+                       ("newton", "dcd")]
+    pscc_dcd = rows[3]
+    # pscc's 600-triangle DCD takes far less than the stand-in's 50 ms.
+    assert 0.0 < pscc_dcd["newton_ratio"] < 1.0
+    assert 0.0 < pscc_dcd["newton_device_ratio"] <= pscc_dcd["newton_ratio"]
+    for r in rows[:4]:
+        assert r["bv_tests"] > 0 and r["triangle_pairs"] >= r["kept_triangle_pairs"] >= 0
+    assert rows[2]["slab_tests"] >= 0 and rows[0]["slab_tests"] == 0
+    lines = broad_phase.report([{"scene": "twisted", "triangles": mesh.face_count, **r} for r in rows])
+    text = "\n".join(lines)
+    assert "| twisted | 600 | DCD | pscc |" in text.replace(",", "")
+    ratio_row = next(line for line in lines if line.startswith("| twisted | 600 | DCD |") and "pscc" not in line
+                     and "newton" not in line and "spatial" not in line)
+    assert ratio_row.split("|")[8].strip() == f"{pscc_dcd['newton_ratio']:.2f}"
