@@ -108,15 +108,21 @@ def _edge(x: np.ndarray, faces: np.ndarray) -> float:
     return float(np.linalg.norm(x[faces[:, 0]] - x[faces[:, 1]], axis=1).mean())
 
 
-@pytest.mark.parametrize("turns", [0.0, 0.5])
-def test_twisted_layers_discrete(turns: float) -> None:
-    mesh = folded_sheet(1500, layers=3, seed=3)
+def _twisted_front(triangles: int, seed: int, turns: float):
+    """Three-layer folded cloth twisted by ``turns``, a quarter edge as the half distance, and the
+    detector whose normal cone test front ran on it (its node ids are the groups' nodes)."""
+    mesh = folded_sheet(triangles, layers=3, seed=seed)
     x = _twist(mesh.vertices_end, turns)
     half = 0.25 * _edge(x, mesh.faces)
-    # The node ids of a real normal cone test front on these positions.
     detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
     detector.detect(x, thickness=2.0 * half)
-    node = detector.front.node_id.numpy()
+    return mesh, x, half, detector
+
+
+@pytest.mark.parametrize("turns", [0.0, 0.5])
+def test_twisted_layers_discrete(turns: float) -> None:
+    mesh, x, half, detector = _twisted_front(1500, 3, turns)
+    node = detector.front.node_id.numpy()  # the node ids of a real normal cone test front
     slab, dropped = _check_conservative(mesh.faces, x, None, node, half)
     assert dropped > 0 or not turns  # flat layers: the culled groups' boxes missed anyway
     _, plain, _, _ = _find(mesh.faces, x, None, node, half, slab=False)
@@ -127,11 +133,7 @@ def test_twisted_layers_discrete(turns: float) -> None:
 
 def test_slab_test_cuts_face_tests_between_twisted_layers() -> None:
     # At this resolution a cell holds a nearly flat piece of each layer, two edges from the next.
-    mesh = folded_sheet(12000, layers=3, seed=0)
-    x = _twist(mesh.vertices_end, 0.5)
-    half = 0.25 * _edge(x, mesh.faces)
-    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
-    detector.detect(x, thickness=2.0 * half)
+    mesh, x, half, detector = _twisted_front(12000, 0, 0.5)
     node = detector.front.node_id.numpy()
     slab_pairs, slab, _, _ = _find(mesh.faces, x, None, node, half, slab=True)
     plain_pairs, plain, _, _ = _find(mesh.faces, x, None, node, half, slab=False)
@@ -260,11 +262,7 @@ def test_bad_slab_arguments() -> None:
 
 
 def test_face_order_gives_the_same_pairs_with_a_shorter_sort() -> None:
-    mesh = folded_sheet(1500, layers=3, seed=4)
-    x = _twist(mesh.vertices_end, 0.3)
-    half = 0.25 * _edge(x, mesh.faces)
-    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
-    detector.detect(x, thickness=2.0 * half)
+    mesh, x, half, detector = _twisted_front(1500, 4, 0.3)
     node = detector.front.node_id.numpy()
     order = wp.array(detector.bvh.face_order.astype(np.int32), dtype=wp.int32, device="cpu")
     device = "cpu"
