@@ -422,6 +422,7 @@ def _slab_pair_passes(
 def _plan_rows(
     # in:
     group_count: int,
+    entry_key: wp.array(dtype=wp.int64),
     entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
@@ -438,7 +439,9 @@ def _plan_rows(
     """One thread per group g: walks the later groups of its cell (the rest of the workLoadHashTable
     row), slab-tests the first MASK_BITS of them whose face tests would number at least
     ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts its rows (maximal runs
-    of later groups that pass), its face tests (work_counts[0]) and its slab tests (work_counts[1])."""
+    of later groups that pass), its face tests (work_counts[0]) and its slab tests (work_counts[1]).
+    A later group with the same key (a node split by the fill order) never passes; its face pairs
+    are counted in work_counts[2] (they must be 0: faces of one node are never paired)."""
     g = wp.tid()
     if g >= group_count:
         return
@@ -451,13 +454,18 @@ def _plan_rows(
     in_run = bool(False)
     work = wp.int64(0)
     slab_tests = wp.int64(0)
+    key = entry_key[start]
+    same_node = wp.int64(0)
     h = g + 1
     t = int(0)
     b = end
     while b < stop:
         h_end = group_end[h]
         passed = bool(True)
-        if slab.enabled != 0 and t < _MASK_BITS:
+        if entry_key[b] == key:
+            passed = False
+            same_node += n_g * wp.int64(h_end - b)
+        elif slab.enabled != 0 and t < _MASK_BITS:
             if n_g * wp.int64(h_end - b) >= slab.min_work:
                 slab_tests += wp.int64(1)
                 passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab)
@@ -478,6 +486,8 @@ def _plan_rows(
         wp.atomic_add(work_counts, 0, work)
     if slab_tests > wp.int64(0):
         wp.atomic_add(work_counts, 1, slab_tests)
+    if same_node > wp.int64(0):
+        wp.atomic_add(work_counts, 2, same_node)
 
 
 @wp.kernel
@@ -502,17 +512,19 @@ def _gather_row_info(
     # out:
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: info[2:5] = [rows, face tests, slab tests], next to [groups, cells], so the
-    host reads all five at once."""
+    """A single thread: info[2:6] = [rows, face tests, slab tests, same-node face pairs], next to
+    [groups, cells], so the host reads all six at once."""
     info[2] = wp.int64(row_end[row_end.shape[0] - 1])
     info[3] = work_counts[0]
     info[4] = work_counts[1]
+    info[5] = work_counts[2]
 
 
 @wp.kernel
 def _write_rows(
     # in:
     group_count: int,
+    entry_key: wp.array(dtype=wp.int64),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
     group_cell: wp.array(dtype=wp.int32),
@@ -536,6 +548,7 @@ def _write_rows(
     mask = wp.uint64(0)
     if slab_enabled != 0:
         mask = group_mask[g]
+    key = entry_key[group_start[g]]
     h = g + 1
     t = int(0)
     b = group_end[g]
@@ -543,7 +556,9 @@ def _write_rows(
     while b < stop:
         h_end = group_end[h]
         passed = bool(True)
-        if slab_enabled != 0 and t < _MASK_BITS:
+        if entry_key[b] == key:
+            passed = False
+        elif slab_enabled != 0 and t < _MASK_BITS:
             passed = ((mask >> wp.uint64(t)) & wp.uint64(1)) != wp.uint64(0)
         if passed and run_start < 0:
             run_start = b
@@ -620,8 +635,7 @@ def _test_bounding_volumes(
     rest = wp.int64(b_end - b_start)
     entry_a = group_starts[g] + int(q // rest)
     entry_b = b_start + int(q % rest)
-    row_key = entry_key[group_starts[g]]
-    row_cell = key_cell(row_key, grid.node_bits)
+    row_cell = key_cell(entry_key[group_starts[g]], grid.node_bits)
     last_a = group_ends[g]
     fa = entry_face[entry_a]
     lower_a = face_lower[fa]
@@ -630,30 +644,24 @@ def _test_bounding_volumes(
         if k >= end_test:
             break
         fb = entry_face[entry_b]
-        emit = True
-        if entry_key[entry_b] == row_key:
-            # Cannot happen: later groups of a cell have other keys (other node ids). Counted so tests
-            # can assert it.
-            wp.atomic_add(counts, 1, wp.int64(1))
-            emit = False
+        # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
+        lower_b = face_lower[fb]
+        emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
         if emit:
-            lower_b = face_lower[fb]
-            emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
-            if emit:
-                # Token position: only the cell holding the lower corner of the boxes' intersection emits.
-                token = cell_of_point(wp.max(lower_a, lower_b), grid.origin, grid.cell_size)
-                emit = linear_cell_id(token, grid.dims) == row_cell
-            if emit and skip_adjacent != 0:
-                ta = faces[fa]
-                tb = faces[fb]
-                for u in range(3):
-                    for v in range(3):
-                        if ta[u] == tb[v]:
-                            emit = False
-            if emit:
-                slot = wp.atomic_add(counts, 0, wp.int64(1))
-                if slot < capacity:
-                    pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
+            # Token position: only the cell holding the lower corner of the boxes' intersection emits.
+            token = cell_of_point(wp.max(lower_a, lower_b), grid.origin, grid.cell_size)
+            emit = linear_cell_id(token, grid.dims) == row_cell
+        if emit and skip_adjacent != 0:
+            ta = faces[fa]
+            tb = faces[fb]
+            for u in range(3):
+                for v in range(3):
+                    if ta[u] == tb[v]:
+                        emit = False
+        if emit:
+            slot = wp.atomic_add(counts, 0, wp.int64(1))
+            if slot < capacity:
+                pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
         k += wp.int64(1)
         entry_b += 1
         if entry_b == b_end:
@@ -670,8 +678,7 @@ def _test_bounding_volumes(
                 entry_a = group_starts[g]
                 entry_b = b_start
                 last_a = group_ends[g]
-                row_key = entry_key[entry_a]
-                row_cell = key_cell(row_key, grid.node_bits)
+                row_cell = key_cell(entry_key[entry_a], grid.node_bits)
             fa = entry_face[entry_a]
             lower_a = face_lower[fa]
             upper_a = face_upper[fa]

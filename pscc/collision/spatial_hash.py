@@ -41,8 +41,8 @@ row_work / row_scan        (R,) int64            BV tests of row r = n_g x (b_en
                                                  scan (searched by the test threads)
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
                                                  (P slots and no keys when ``sort_pairs`` is off)
-counts                     (2,) int64            [pairs emitted, same-node tests (always 0)]
-work_counts                (2,) int64            [face tests, slab tests] of the planned rows
+counts                     (2,) int64            [pairs emitted, unused]
+work_counts                (3,) int64            [face tests, slab tests, same-node face pairs] of the rows
 =========================  ====================  ===========================================================
 
 Sync points of :meth:`SpatialHash.find_pairs` (host reads of device data, each a few scalars):
@@ -113,7 +113,8 @@ class SpatialHashStats:
         mean_cells_per_face: E / face_count.
         coarsenings: times the cell size was doubled by the grid guard.
         reruns: times the test pass ran again after the pair buffer grew.
-        same_node_tests: tests that met two faces of one node (always 0; checked by the tests).
+        same_node_tests: face pairs of one node that met in a cell in two groups (never tested; 0
+            unless a ``face_order`` splits a node; checked by the tests).
         device_bytes: bytes held on the device, per buffer.
     """
 
@@ -260,9 +261,9 @@ class SpatialHash:
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.grid_max = wp.zeros(4, dtype=wp.int32, device=dev)
         self.entry_info = wp.zeros(5, dtype=wp.int64, device=dev)
-        self.table_info = wp.zeros(5, dtype=wp.int64, device=dev)
+        self.table_info = wp.zeros(6, dtype=wp.int64, device=dev)
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
-        self.work_counts = wp.zeros(2, dtype=wp.int64, device=dev)
+        self.work_counts = wp.zeros(3, dtype=wp.int64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
         self._allocate_entries(max(1, 4 * m))
         capacity = 4 * m if pair_capacity is None else pair_capacity
@@ -622,8 +623,8 @@ class SpatialHash:
         row_end = self.cell_rank[:groups]
         self.work_counts.zero_()
         wp.launch(kernels._plan_rows, dim=groups,
-                  inputs=[groups, self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_axis, self.group_slab, slab],
+                  inputs=[groups, self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
+                          self.cell_end, self.group_axis, self.group_slab, slab],
                   outputs=[self.group_mask, row_count, self.work_counts], device=dev)
         wp.utils.array_scan(row_count, row_end, inclusive=True)
         wp.launch(kernels._gather_row_info, dim=1, inputs=[row_end, self.work_counts], outputs=[self.table_info],
@@ -636,13 +637,14 @@ class SpatialHash:
         self.stats.face_tests = int(info[3])
         self.stats.slab_tests = int(info[4])
         self.stats.bv_tests = self.stats.face_tests + self.stats.slab_tests
+        self.stats.same_node_tests = int(info[5])
         if rows == 0:
             return
         if rows > self.row_capacity:
             self._allocate_rows(int(rows * _GROWTH) + 1)
         wp.launch(kernels._write_rows, dim=groups,
-                  inputs=[groups, self.group_start, self.group_end, self.group_cell, self.cell_end, self.group_mask,
-                          slab.enabled, row_count, row_end],
+                  inputs=[groups, self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
+                          self.group_mask, slab.enabled, row_count, row_end],
                   outputs=[self.row_span, self.row_work], device=dev)
         wp.utils.array_scan(self.row_work[:rows], self.row_scan[:rows], inclusive=True)
 
@@ -679,7 +681,6 @@ class SpatialHash:
             self.stats.reruns += 1
         self._pair_count = found
         self.stats.triangle_pairs = found
-        self.stats.same_node_tests = int(counts[1])
 
     def _sort_pairs(self) -> None:
         """Radix-sort the emitted pairs on a * face_count + b, so the output is deterministic."""
