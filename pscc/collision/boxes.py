@@ -30,18 +30,21 @@ def _compute_vertex_boxes(
     # in:
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
+    swept: int,
     half_distance: float,
     relative_pad: float,
     # out:
     lower_out: wp.array(dtype=wp.vec3),
     upper_out: wp.array(dtype=wp.vec3),
 ):
-    """One thread per vertex."""
+    """One thread per vertex (``swept`` = 0: positions_t1 is not read)."""
     i = wp.tid()
-    a = positions_t0[i]
-    b = positions_t1[i]
-    lo = wp.min(a, b)
-    hi = wp.max(a, b)
+    lo = positions_t0[i]
+    hi = lo
+    if swept != 0:
+        b = positions_t1[i]
+        lo = wp.min(lo, b)
+        hi = wp.max(hi, b)
     lower_out[i] = grow_box_lower(lo, hi, half_distance, relative_pad)
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
 
@@ -52,17 +55,25 @@ def _compute_edge_boxes(
     edges: wp.array(dtype=wp.vec2i),
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
+    swept: int,
     half_distance: float,
     relative_pad: float,
     # out:
     lower_out: wp.array(dtype=wp.vec3),
     upper_out: wp.array(dtype=wp.vec3),
 ):
-    """One thread per edge."""
+    """One thread per edge (``swept`` = 0: positions_t1 is not read)."""
     i = wp.tid()
     e = edges[i]
-    lo = wp.min(wp.min(positions_t0[e[0]], positions_t0[e[1]]), wp.min(positions_t1[e[0]], positions_t1[e[1]]))
-    hi = wp.max(wp.max(positions_t0[e[0]], positions_t0[e[1]]), wp.max(positions_t1[e[0]], positions_t1[e[1]]))
+    a = positions_t0[e[0]]
+    b = positions_t0[e[1]]
+    lo = wp.min(a, b)
+    hi = wp.max(a, b)
+    if swept != 0:
+        a = positions_t1[e[0]]
+        b = positions_t1[e[1]]
+        lo = wp.min(lo, wp.min(a, b))
+        hi = wp.max(hi, wp.max(a, b))
     lower_out[i] = grow_box_lower(lo, hi, half_distance, relative_pad)
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
 
@@ -73,19 +84,27 @@ def _compute_face_boxes(
     faces: wp.array(dtype=wp.vec3i),
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
+    swept: int,
     half_distance: float,
     relative_pad: float,
     # out:
     lower_out: wp.array(dtype=wp.vec3),
     upper_out: wp.array(dtype=wp.vec3),
 ):
-    """One thread per face."""
+    """One thread per face (``swept`` = 0: positions_t1 is not read)."""
     i = wp.tid()
     f = faces[i]
-    lo = wp.min(wp.min(positions_t0[f[0]], positions_t0[f[1]]), positions_t0[f[2]])
-    lo = wp.min(lo, wp.min(wp.min(positions_t1[f[0]], positions_t1[f[1]]), positions_t1[f[2]]))
-    hi = wp.max(wp.max(positions_t0[f[0]], positions_t0[f[1]]), positions_t0[f[2]])
-    hi = wp.max(hi, wp.max(wp.max(positions_t1[f[0]], positions_t1[f[1]]), positions_t1[f[2]]))
+    a = positions_t0[f[0]]
+    b = positions_t0[f[1]]
+    c = positions_t0[f[2]]
+    lo = wp.min(wp.min(a, b), c)
+    hi = wp.max(wp.max(a, b), c)
+    if swept != 0:
+        a = positions_t1[f[0]]
+        b = positions_t1[f[1]]
+        c = positions_t1[f[2]]
+        lo = wp.min(lo, wp.min(wp.min(a, b), c))
+        hi = wp.max(hi, wp.max(wp.max(a, b), c))
     lower_out[i] = grow_box_lower(lo, hi, half_distance, relative_pad)
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
 
@@ -143,17 +162,19 @@ class PrimitiveBoxes:
 
     def compute(self, positions_t0: wp.array, positions_t1: wp.array, distance: float) -> None:
         """Fill every box from positions at t0 and t1, grown so pairs closer than ``distance`` overlap.
+        Passing the same array twice (discrete detection) reads the positions once.
 
         Allocates: no. Capture-safe: yes.
         """
         half = 0.5 * float(distance)
         pad = tolerances.BOX_RELATIVE_PAD
+        swept = int(positions_t1 is not positions_t0)
         wp.launch(_compute_vertex_boxes, dim=self.vertex_lower.shape[0],
-                  inputs=[positions_t0, positions_t1, half, pad],
+                  inputs=[positions_t0, positions_t1, swept, half, pad],
                   outputs=[self.vertex_lower, self.vertex_upper], device=self.device)
         wp.launch(_compute_edge_boxes, dim=self.edge_lower.shape[0],
-                  inputs=[self.edges, positions_t0, positions_t1, half, pad],
+                  inputs=[self.edges, positions_t0, positions_t1, swept, half, pad],
                   outputs=[self.edge_lower, self.edge_upper], device=self.device)
         wp.launch(_compute_face_boxes, dim=self.face_lower.shape[0],
-                  inputs=[self.faces, positions_t0, positions_t1, half, pad],
+                  inputs=[self.faces, positions_t0, positions_t1, swept, half, pad],
                   outputs=[self.face_lower, self.face_upper], device=self.device)
