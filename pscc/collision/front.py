@@ -301,6 +301,8 @@ class NormalConeFront:
         roots = np.asarray(bvh.roots, dtype=np.int32)
         self.front.assign(np.concatenate([roots, np.zeros(n - len(roots), np.int32)]))
         self.front_size = int(len(roots))
+        self._refit_key: tuple | None = None
+        self._refit_launches: list = []
         self.args = NodeTestArgs()
         self.args.bvh = bvh.arrays
         self.args.faces = faces
@@ -376,12 +378,23 @@ class NormalConeFront:
         return self.node_id
 
     def _refit(self) -> None:
-        offsets = self.bvh.level_offsets
-        for depth in range(len(offsets) - 2, -1, -1):
-            first, last = int(offsets[depth]), int(offsets[depth + 1])
-            if last > first:
-                wp.launch(_refit_level, dim=last - first, inputs=[self.args, first],
-                          outputs=[self.node_mask, self.node_normal], device=self.device)
+        """One launch per BVH level, bottom-up. The launches are recorded once per set of position
+        arrays (the arguments are the same every call while those arrays are), which saves their
+        argument packing on every call."""
+        args = self.args
+        key = (args.positions_t0.ptr, args.positions_t1.ptr, args.swept)
+        if key != self._refit_key:
+            offsets = self.bvh.level_offsets
+            self._refit_launches = []
+            for depth in range(len(offsets) - 2, -1, -1):
+                first, last = int(offsets[depth]), int(offsets[depth + 1])
+                if last > first:
+                    self._refit_launches.append(
+                        wp.launch(_refit_level, dim=last - first, inputs=[args, first],
+                                  outputs=[self.node_mask, self.node_normal], device=self.device, record_cmd=True))
+            self._refit_key = key
+        for launch in self._refit_launches:
+            launch.launch()
 
     def _sprout(self) -> tuple[int, int]:
         frontier, frontier_next = self._frontier, self._frontier_next
