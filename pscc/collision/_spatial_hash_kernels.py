@@ -15,7 +15,9 @@ kernel                                one thread per
 ``_compute_group_slabs``              group (group slab test only): its axis and slab
 ``_plan_rows``                        group: slab tests against later groups of its cell, its rows
                                       (runs of later groups that pass) and their BV tests
-``_gather_table_info``                (single thread) rows, face tests, group tests for the host
+``_gather_table_info``                (single thread) group and cell counts, before the rank buffers
+                                      are reused for the rows
+``_gather_row_info``                  (single thread) rows, face tests, slab tests, same-node pairs
 ``_write_rows``                       group: its rows (a-range = the group, b-range = a run of
                                       later groups of its cell) and the BV tests of each
 ``_test_bounding_volumes``            BV test (a batch of the global test index range)
@@ -365,7 +367,7 @@ def _compute_group_slabs(
     if wp.int64(end - start) * wp.int64(others) < slab.min_work:
         group_axis[g] = wp.vec3(0.0, 0.0, 0.0)
         return
-    # The normal of the group's middle face (entries of a group are in face order): one cross product
+    # The normal of the group's middle face (in fill order): one cross product
     # instead of a pass over the group; on a flat patch every face gives nearly the same axis.
     tri = slab.faces[entry_face[(start + end) // 2]]
     a = slab.positions_t0[tri[0]]
@@ -431,6 +433,7 @@ def _plan_rows(
     group_axis: wp.array(dtype=wp.vec3),
     group_slab: wp.array(dtype=wp.vec2),
     slab: SlabArgs,
+    check_keys: int,
     # out:
     group_mask: wp.array(dtype=wp.uint64),
     row_count: wp.array(dtype=wp.int32),
@@ -440,8 +443,10 @@ def _plan_rows(
     row), slab-tests the first MASK_BITS of them whose face tests would number at least
     ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts its rows (maximal runs
     of later groups that pass), its face tests (work_counts[0]) and its slab tests (work_counts[1]).
-    A later group with the same key (a node split by the fill order) never passes; its face pairs
-    are counted in work_counts[2] (they must be 0: faces of one node are never paired)."""
+    With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
+    same key never passes and its face pairs are counted in work_counts[2] (they must be 0: faces of
+    one node are never paired). Once no check is left for the rest of the cell (no key check, and no
+    slab test or past MASK_BITS), the rest is one run, added in O(1)."""
     g = wp.tid()
     if g >= group_count:
         return
@@ -460,9 +465,14 @@ def _plan_rows(
     t = int(0)
     b = end
     while b < stop:
+        if check_keys == 0 and (slab.enabled == 0 or t >= _MASK_BITS):
+            if not in_run:
+                runs += 1
+            work += n_g * wp.int64(stop - b)
+            break
         h_end = group_end[h]
         passed = bool(True)
-        if entry_key[b] == key:
+        if check_keys != 0 and entry_key[b] == key:
             passed = False
             same_node += n_g * wp.int64(h_end - b)
         elif slab.enabled != 0 and t < _MASK_BITS:
@@ -531,6 +541,7 @@ def _write_rows(
     cell_end: wp.array(dtype=wp.int32),
     group_mask: wp.array(dtype=wp.uint64),
     slab_enabled: int,
+    check_keys: int,
     row_count: wp.array(dtype=wp.int32),
     row_end: wp.array(dtype=wp.int32),
     # out:
@@ -554,9 +565,13 @@ def _write_rows(
     b = group_end[g]
     run_start = int(-1)
     while b < stop:
+        if check_keys == 0 and (slab_enabled == 0 or t >= _MASK_BITS):
+            if run_start < 0:
+                run_start = b
+            break
         h_end = group_end[h]
         passed = bool(True)
-        if entry_key[b] == key:
+        if check_keys != 0 and entry_key[b] == key:
             passed = False
         elif slab_enabled != 0 and t < _MASK_BITS:
             passed = ((mask >> wp.uint64(t)) & wp.uint64(1)) != wp.uint64(0)

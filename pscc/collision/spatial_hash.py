@@ -380,8 +380,8 @@ class SpatialHash:
                 equal node ids are contiguous (for PSCC the BVH's face order: every front node is
                 a range of it). Entries are then laid out in this order, so after a stable sort on
                 the cell bits alone the faces of a node stay together in each cell: the sort skips
-                the node bits. Checked to be a permutation once per array; a grouping it breaks is
-                caught by the same-node counter.
+                the node bits. Checked to be a permutation once per array (its contents must not
+                change between calls); a grouping it breaks is caught by the same-node counter.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
@@ -435,7 +435,7 @@ class SpatialHash:
         order = self.own_node_id if face_order is None else face_order
         entries = self._insert_faces(face_lower, face_upper, node_id, node_limit, grid, cell_size, extent, order,
                                      face_order is not None, grouped_fill)
-        self._build_tables(entries, grid.node_bits, slab)
+        self._build_tables(entries, grid.node_bits, slab, int(face_order is not None))
         self._test_pairs(face_lower, face_upper, grid)
         if face_order is not None and self.stats.same_node_tests > 0:
             raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
@@ -596,7 +596,7 @@ class SpatialHash:
         wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, first_bit, grid.node_bits + cell_bits)
         return entries
 
-    def _build_tables(self, entries: int, node_bits: int, slab: kernels.SlabArgs) -> None:
+    def _build_tables(self, entries: int, node_bits: int, slab: kernels.SlabArgs, check_keys: int) -> None:
         """Run heads -> ranks -> group and cell ranges -> slab tests and work rows -> row scan.
         Sync points 3 (group count) and 4 (cells, rows, face tests, slab tests)."""
         dev = self.device
@@ -624,7 +624,7 @@ class SpatialHash:
         self.work_counts.zero_()
         wp.launch(kernels._plan_rows, dim=groups,
                   inputs=[groups, self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
-                          self.cell_end, self.group_axis, self.group_slab, slab],
+                          self.cell_end, self.group_axis, self.group_slab, slab, check_keys],
                   outputs=[self.group_mask, row_count, self.work_counts], device=dev)
         wp.utils.array_scan(row_count, row_end, inclusive=True)
         wp.launch(kernels._gather_row_info, dim=1, inputs=[row_end, self.work_counts], outputs=[self.table_info],
@@ -644,7 +644,7 @@ class SpatialHash:
             self._allocate_rows(int(rows * _GROWTH) + 1)
         wp.launch(kernels._write_rows, dim=groups,
                   inputs=[groups, self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_mask, slab.enabled, row_count, row_end],
+                          self.group_mask, slab.enabled, check_keys, row_count, row_end],
                   outputs=[self.row_span, self.row_work], device=dev)
         wp.utils.array_scan(self.row_work[:rows], self.row_scan[:rows], inclusive=True)
 
