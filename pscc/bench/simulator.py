@@ -367,7 +367,7 @@ def _run_method(name: str, scene: Scene, frames: int, make: Callable[[], Any], p
     if isinstance(runner, Simulation):
         counts = [f["counts"] for f in runner.frame_stats]
         row["pscc_counts"] = {k: int(sum(c.get(k, 0) for c in counts))
-                              for k in ("halvings", "ccd_hits", "impulse_rounds", "zone_rounds", "cg_iterations")}
+                              for k in ("halvings", "ccd_hits", "projection_rounds", "zone_rounds", "cg_iterations")}
     return row
 
 
@@ -444,7 +444,7 @@ def solver_memory(sim: Simulation) -> dict[str, int]:
     memory = {f"collision.{k}": int(v) for k, v in detector.items() if k != "total"}
     memory["collision.total"] = int(detector["total"])
     solver = sim.solver.device_bytes()
-    for key in ("contact_springs", "impulses", "intersection_check", "integrator"):
+    for key in ("contact_springs", "projection", "intersection_check", "integrator"):
         memory[key] = solver[key]
     memory["states"] = warp_array_bytes(sim.state) + warp_array_bytes(sim._next)
     return memory
@@ -722,7 +722,7 @@ def report_breakdown(results: dict[str, Any], plot: str | None) -> list[str]:
         "those objects hold.",
         "",
         "| scene | triangles | " + " | ".join(s.removeprefix("collision.") for s in structures)
-        + " | collision total | contact springs | impulses | intersection check | integrator | states | total MiB |",
+        + " | collision total | contact springs | projection | intersection check | integrator | states | total MiB |",
         "|---|---:|" + "---:|" * (len(structures) + 7),
     ]
     for r in rows:
@@ -731,7 +731,7 @@ def report_breakdown(results: dict[str, Any], plot: str | None) -> list[str]:
         cells = " | ".join(f"{memory.get(s, 0) / per:.0f}" for s in structures)
         total = sum(v for k, v in memory.items() if k != "collision.total")
         lines.append(f"| {r['scene']} | {r['triangles']:,} | {cells} | **{memory['collision.total'] / per:.0f}** | "
-                     f"{memory['contact_springs'] / per:.0f} | {memory.get('impulses', 0) / per:.0f} | "
+                     f"{memory['contact_springs'] / per:.0f} | {memory.get('projection', 0) / per:.0f} | "
                      f"{memory['intersection_check'] / per:.0f} | "
                      f"{memory['integrator'] / per:.0f} | {memory['states'] / per:.0f} | {total / 2**20:.1f} |")
     lines += ["", f"Runtime of this section: {results['seconds']:.0f} s.", ""]

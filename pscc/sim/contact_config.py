@@ -23,12 +23,16 @@ class ContactConfig:
     """CCD minimum distance delta = ratio x h: a pair coming closer than delta during a step is a
     collision to resolve (dimensionless, in (0, 1))."""
     separation_ratio: float = 0.2
-    """Impulses and zones leave resolved pairs this far apart at the end of the step, as a fraction
-    of h (dimensionless, > ccd_distance_ratio so resolved pairs are not found again)."""
-    impulse_rounds: int = 6
-    """CCD + impulse rounds before switching to rigid impact zones."""
+    """The projection and the zones leave resolved pairs this far apart at the end of the step, as a
+    fraction of h (dimensionless, > ccd_distance_ratio so resolved pairs are not found again)."""
+    projection_rounds: int = 24
+    """CCD rounds answered by the inelastic projection (:mod:`pscc.sim.inelastic_projection`) before
+    switching to rigid impact zones."""
+    projection_iterations: int = 512
+    """Dual iterations of one projection at most (it stops earlier once every gap is within half of
+    (separation - CCD distance) of the separation)."""
     max_response_rounds: int = 100
-    """CCD rounds per step (impulses plus zones) before the step is rejected and retried with dt / 2."""
+    """CCD rounds per step (projection plus zones) before the step is rejected and retried with dt / 2."""
     max_step_halvings: int = 4
     """How often a rejected step may be split in two; beyond that the run stops with an error."""
     check_intersections: bool = True
@@ -52,7 +56,7 @@ class ContactConfig:
         if not float(self.ccd_distance_ratio) < float(self.separation_ratio) <= 1.0:
             raise InputError(owner, "separation_ratio", f"{self.separation_ratio!r} is not in (ccd_distance_ratio, 1]",
                              "use a value such as 2 x ccd_distance_ratio")
-        for name in ("impulse_rounds", "max_response_rounds", "max_step_halvings"):
+        for name in ("projection_rounds", "projection_iterations", "max_response_rounds", "max_step_halvings"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise InputError(owner, name, f"{value!r} is not an integer >= 0", f"set {name} to an integer >= 0")

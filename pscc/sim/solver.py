@@ -8,8 +8,10 @@ One :meth:`ClothSolver.step` (the paper's Figure 8b pipeline, details in ``docs/
 2. **Broad phase**, once: swept boxes over [x_t, x_pred] grown by the thickness h (normal-cone
    front, {cell, node} hashing, feature pairs).
 3. **CCD + penetration handling** on those candidates: every pair coming closer than delta during
-   the step gets an inelastic impulse on its end positions; after ``impulse_rounds`` rounds the
-   colliding vertices are merged into rigid impact zones, until CCD finds nothing.
+   the step becomes a linear constraint on the end positions, and the end positions are projected
+   onto all constraints found so far in the step (the inelastic projection); after
+   ``projection_rounds`` rounds the colliding vertices are merged into rigid impact zones, until
+   CCD finds nothing.
 4. When the response moved anything, the final trajectory is **certified** by one more broad phase
    over it (the candidates and the normal-cone front of step 2 were computed for the predicted
    trajectory) and CCD again; the loop continues if that finds a collision.
@@ -35,7 +37,8 @@ from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
 from pscc.sim.contact_config import ContactConfig
-from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones, ImpulseResponse
+from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones
+from pscc.sim.inelastic_projection import InelasticProjection
 from pscc.sim.integrator import ImplicitEuler
 from pscc.sim.memory import warp_array_bytes
 from pscc.sim.model import VERTEX_FREE, ClothModel
@@ -72,9 +75,9 @@ def _velocities_from_positions(
 def _new_stats() -> dict[str, Any]:
     seconds = {k: 0.0 for k in ("integration", "broad_phase", "narrow_phase", "penetration", "proximity",
                                  "intersection_check", "total")}
-    counts = {k: 0 for k in ("cg_iterations", "broad_phases", "ccd_rounds", "ccd_hits", "impulse_rounds",
-                             "zone_rounds", "halvings", "contacts", "front_size", "dcd_vertex_face",
-                             "dcd_edge_edge")}
+    counts = {k: 0 for k in ("cg_iterations", "broad_phases", "ccd_rounds", "ccd_hits", "projection_rounds",
+                             "projection_iterations", "zone_rounds", "halvings", "contacts", "front_size",
+                             "dcd_vertex_face", "dcd_edge_edge")}
     return {"seconds": seconds, "counts": counts}
 
 
@@ -160,7 +163,8 @@ class ClothSolver:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
         self.ccd_distance = self.contact.ccd_distance_ratio * self.thickness
         self.separation = self.contact.separation_ratio * self.thickness
-        self.impulses = ImpulseResponse(inverse_mass, self.device)
+        self.projection = InelasticProjection(inverse_mass, self.device,
+                                              max_iterations=self.contact.projection_iterations)
         self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device)
         self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device)
         extent = vertices.max(axis=0) - vertices.min(axis=0)
@@ -197,7 +201,7 @@ class ClothSolver:
         """Device memory per structure, in bytes, and their ``total``.
 
         ``collision`` (the detector's own accounting: BVH, front, hash tables, pair buffers),
-        ``contact_springs``, ``impulses`` (penetration-handling buffers), ``intersection_check``,
+        ``contact_springs``, ``projection`` (penetration-handling buffers), ``intersection_check``,
         ``integrator`` (block-sparse system, PCG vectors and the model's arrays). States are owned by
         the caller and not counted.
         """
@@ -208,7 +212,7 @@ class ClothSolver:
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": int(contact),
-            "impulses": warp_array_bytes(self.impulses, seen=seen),
+            "projection": warp_array_bytes(self.projection, seen=seen),
             "intersection_check": warp_array_bytes(self.intersection_check, seen=seen),
             "integrator": warp_array_bytes(self.integrator, seen=seen) + warp_array_bytes(self.model, seen=seen),
         }
@@ -276,7 +280,7 @@ class ClothSolver:
         Returns:
             Step stats: ``seconds`` per stage (integration, broad_phase, narrow_phase, penetration,
             proximity, intersection_check, total) and ``counts`` (cg_iterations, broad_phases,
-            ccd_rounds, ccd_hits, impulse_rounds, zone_rounds, halvings, contacts, front_size,
+            ccd_rounds, ccd_hits, projection_rounds, projection_iterations, zone_rounds, halvings, contacts, front_size,
             dcd_vertex_face, dcd_edge_edge).
 
         Raises:
@@ -362,6 +366,8 @@ class ClothSolver:
         positions_t0 = wp.array(x0, dtype=wp.vec3, device=self.device)
         positions_t1 = wp.array(x1, dtype=wp.vec3, device=self.device)
         rounds = 0
+        self.projection.reset()
+        tolerance = 0.5 * (self.separation - self.ccd_distance)
         while True:
             mark = time.perf_counter()
             result = self.detector.narrow_phase(x0, x1, self.ccd_distance)
@@ -384,11 +390,13 @@ class ClothSolver:
             certified = False
             mark = time.perf_counter()
             vertex_face = np.concatenate([result.vertex_face[:, :1], faces[result.vertex_face[:, 1]]], axis=1)
-            if rounds <= self.contact.impulse_rounds:
-                counts["impulse_rounds"] += 1
-                positions_t1.assign(x1)
-                self.impulses.apply(vertex_face, result.vertex_face_toi, result.edge_edge, result.edge_edge_toi,
-                                    positions_t0, positions_t1, self.separation)
+            if rounds <= self.contact.projection_rounds:
+                counts["projection_rounds"] += 1
+                # positions_t1 holds x1 here: the integrator's end positions or the last projection.
+                self.projection.add(vertex_face, result.vertex_face_toi, result.edge_edge, result.edge_edge_toi,
+                                    positions_t0, positions_t1)
+                solved = self.projection.solve(positions_t1, self.separation, tolerance)
+                counts["projection_iterations"] += solved.iterations
                 x1 = positions_t1.numpy()
             else:
                 counts["zone_rounds"] += 1

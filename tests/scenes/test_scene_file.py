@@ -353,7 +353,7 @@ contact_stiffness = 2000
 wind = [1, 0, 0]
 [contact]
 method = "brute-force"
-impulse_rounds = 2
+projection_rounds = 2
 """ + SHEET.replace("[cloth.sheet]", 'translate = [0.0, 0.0, 1.0]\nrotate = [10.0, 20.0, 30.0]\n'
                     'pins = { corner = ["top-left", "top-right"] }\n[cloth.sheet]') + """
 [[cloth.handles]]

@@ -1,60 +1,12 @@
-"""Impulses and rigid impact zones: they clear collisions, keep kinematic vertices, and zones move affinely."""
+"""Rigid impact zones move affinely, follow their kinematic group and refuse two motions; keyframes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 
-from pscc.geometry.ccd import vertex_face_ccd
-from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones, ImpulseResponse
+from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones
 from pscc.sim.obstacles import KeyframedMotion, rotation_from_axis_angle, step_map
-
-
-def _vertex_face_hits(x0: np.ndarray, x1: np.ndarray, minimum_distance: float) -> np.ndarray:
-    points0 = x0[None, [0, 1, 2, 3]]
-    points1 = x1[None, [0, 1, 2, 3]]
-    hit, _ = vertex_face_ccd(points0, points1, minimum_distance=minimum_distance)
-    return hit
-
-
-def test_impulse_pushes_vertex_back_and_conserves_momentum(device: str) -> None:
-    # Vertex 0 falls through the triangle (1, 2, 3) lying in z = 0.
-    x0 = np.array([[0.2, 0.2, 0.05], [0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
-    x1 = x0.copy()
-    x1[0, 2] = -0.05
-    masses = np.array([1.0, 1.0, 1.0, 1.0])
-    response = ImpulseResponse(1.0 / masses, wp.get_device(device))
-    p0 = wp.array(x0, dtype=wp.vec3, device=device)
-    p1 = wp.array(x1, dtype=wp.vec3, device=device)
-    assert _vertex_face_hits(x0, x1, 1e-3).all()
-    for _ in range(3):
-        response.apply(np.array([[0, 1, 2, 3]]), np.array([0.5]), np.zeros((0, 4), np.int32), np.zeros(0),
-                       p0, p1, separation=0.01)
-    result = p1.numpy()
-    # The vertex ends above the face point under it (barycentric (0.6, 0.2, 0.2)) by the separation.
-    under = 0.6 * result[1] + 0.2 * result[2] + 0.2 * result[3]
-    assert result[0, 2] - under[2] == pytest.approx(0.01, abs=2e-4)
-    momentum_before = (masses[:, None] * (x1 - x0)).sum(axis=0)
-    momentum_after = (masses[:, None] * (result - x0)).sum(axis=0)
-    np.testing.assert_allclose(momentum_after, momentum_before, atol=1e-6)
-    hit, _ = vertex_face_ccd(x0[None], result[None], minimum_distance=1e-3)
-    assert not hit.any()
-
-
-def test_impulse_never_moves_kinematic_vertices(device: str) -> None:
-    x0 = np.array([[0.2, 0.2, 0.05], [0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
-    x1 = x0.copy()
-    x1[0, 2] = -0.05
-    inverse_mass = np.array([1.0, 0.0, 0.0, 0.0])  # the face is an obstacle
-    response = ImpulseResponse(inverse_mass, wp.get_device(device))
-    p0 = wp.array(x0, dtype=wp.vec3, device=device)
-    p1 = wp.array(x1, dtype=wp.vec3, device=device)
-    response.apply(np.array([[0, 1, 2, 3]]), np.array([0.5]), np.zeros((0, 4), np.int32), np.zeros(0),
-                   p0, p1, separation=0.01)
-    result = p1.numpy()
-    np.testing.assert_array_equal(result[1:], x1[1:])
-    assert result[0, 2] == pytest.approx(0.01, abs=1e-6)
 
 
 def test_free_zone_moves_affinely_and_keeps_momentum() -> None:

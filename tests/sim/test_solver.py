@@ -159,7 +159,8 @@ def test_contact_buffers_grow_under_heavy_contact() -> None:
 def test_device_bytes_counts_every_structure_and_grows_with_the_mesh() -> None:
     small, large = (ClothSolver(build_scene("drape", n), device="cpu").device_bytes() for n in (400, 1600))
     for memory in (small, large):
-        assert set(memory) == {"collision", "contact_springs", "impulses", "intersection_check", "integrator", "total"}
+        assert set(memory) == {"collision", "contact_springs", "projection", "intersection_check", "integrator",
+                               "total"}
         assert all(v > 0 for v in memory.values())
         assert memory["total"] == sum(v for k, v in memory.items() if k != "total")
     for key in ("collision", "intersection_check", "integrator"):
@@ -257,7 +258,7 @@ def test_a_step_that_cannot_be_fixed_stops_with_an_error() -> None:
     scene = build_scene("twist", 300)
     for handle in scene.handles:
         handle.motion = (lambda m: (lambda t: m(4.0 * t)))(handle.motion)
-    contact = ContactConfig(max_response_rounds=1, impulse_rounds=0, max_step_halvings=0)
+    contact = ContactConfig(max_response_rounds=1, projection_rounds=0, max_step_halvings=0)
     solver = ClothSolver(scene, device="cpu", contact=contact)
     state, other = solver.initial_state(), solver.initial_state()
     with pytest.raises(SimulationError, match="halvings"):
@@ -275,6 +276,6 @@ def test_mesh_sequence_obstacle_with_impact_zones() -> None:
     # The sphere breathes (non-rigid: radius 0.25 -> 0.27) and rises, played as a mesh sequence.
     frames = np.stack([sphere.vertices * (1.0 + 0.02 * k) + [0.0, 0.0, 0.004 * k] for k in range(20)])
     scene.obstacles = [SequenceObstacle(frames, sphere.faces, frame_time=scene.frame_time, name="breathing")]
-    contact = ContactConfig(impulse_rounds=0)  # every collision goes through the impact zones
+    contact = ContactConfig(projection_rounds=0)  # every collision goes through the impact zones
     solver, checker, history = _run(scene, 40, contact)
     assert _total(history, "zone_rounds") > 0

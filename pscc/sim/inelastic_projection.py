@@ -1,0 +1,370 @@
+"""Penetration handling after CCD: the inelastic projection of the step's end positions.
+
+Positions are in the collision index space of the simulator (cloth vertices first, then the
+obstacle vertices). A step moves every vertex on the straight line from ``x0`` (start, free of
+intersections) to ``x1`` (end); CCD reports the pairs that come closer than the minimum distance on
+the way, with a time of impact ``toi``. The response changes only ``x1``.
+
+Every colliding pair becomes one linear **constraint** on the end positions, frozen at its time of
+impact (the linearised gap of Harmon et al. 2008, "Robust treatment of simultaneous collisions"):
+signed weights ``w`` (vertex-face ``(1, -b_a, -b_b, -b_c)``, edge-edge ``(1 - s, s, -(1 - t), -t)``
+with the closest-point coordinates at ``toi``) and the unit contact normal ``n`` at ``toi`` give
+
+    g_k(x) = n_k . sum_i w_ki x_i  >=  separation.
+
+The projection moves the integrator's end positions ``x~`` as little as possible in the mass norm
+while meeting every constraint found so far in the step (constraints accumulate over CCD rounds,
+so a resolved pair cannot come back):
+
+    minimise 1/2 (x - x~)^T M (x - x~)   subject to   g_k(x) >= separation for all k,
+
+with kinematic vertices (pins, handles, obstacles; inverse mass 0) fixed. Unlike a rigid impact
+zone, the colliding cloth keeps deforming and can slide along a kinematic object, so a contact
+region that touches two differently moving objects (a spinning ball and a held corner) is solved
+instead of failing.
+
+**Solver.** The dual of this quadratic programme is solved by projected gradient ascent, one
+thread per constraint (Jacobi, so the result does not depend on the order of the pairs):
+``x = x~ + M^-1 A^T lambda``, and every iteration sets
+
+    lambda_k <- max(0, lambda_k - (g_k(x) - separation) / D_k),   D_k = sum_i |w_ki| m_i^-1 S_i,
+
+where ``S_i = sum_{j touching i} |w_ji|``. ``D`` bounds every row sum of the dual Hessian
+``H = A M^-1 A^T`` (``|H_kj| <= sum_{i in k and j} |w_ki| |w_ji| / m_i``, unit normals), so the
+diagonal matrix ``D`` dominates ``H`` (Gershgorin) and every step increases the dual objective: the
+iteration converges to the projection whenever the constraints can be met. Iterations stop when
+every gap is within ``tolerance`` of ``separation`` (checked every few iterations) or after
+``max_iterations``. The solver then runs CCD again; constraints it cannot meet (a free vertex
+squeezed between two kinematic objects) are left to the rigid impact zones
+(:class:`pscc.sim.impact_response.ImpactZones`) and, at last, to a smaller step.
+
+Momentum: every constraint's correction ``M^-1 w_k n_k lambda_k`` has zero total momentum when all
+its vertices are free (the weights sum to zero), as for an inelastic impulse.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def _normal_or_fallback(offset: wp.vec3, fallback: wp.vec3, start_offset: wp.vec3) -> wp.vec3:
+    """Unit contact normal: the closest-point offset, else ``fallback`` oriented like the start."""
+    length = wp.length(offset)
+    if length > 1.0e-12:
+        return offset / length
+    n = fallback
+    if wp.length(n) <= 1.0e-20:
+        n = start_offset
+    if wp.length(n) <= 1.0e-20:
+        n = wp.vec3(0.0, 0.0, 1.0)
+    n = wp.normalize(n)
+    if wp.dot(n, start_offset) < 0.0:
+        n = -n
+    return n
+
+
+@wp.kernel
+def _vertex_face_constraints(
+    # in:
+    pairs: wp.array(dtype=wp.vec4i),
+    toi: wp.array(dtype=float),
+    positions_t0: wp.array(dtype=wp.vec3),
+    positions_t1: wp.array(dtype=wp.vec3),
+    first: int,
+    # out:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    normals: wp.array(dtype=wp.vec3),
+):
+    """One thread per colliding vertex-face pair (p, a, b, c): its constraint at slot first + i."""
+    i = wp.tid()
+    ids = pairs[i]
+    s = toi[i]
+    p = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
+    a = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
+    b = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
+    c = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
+    w = vertex_face_closest_point(p, a, b, c)
+    q = w[0] * a + w[1] * b + w[2] * c
+    p0 = positions_t0[ids[0]]
+    q0 = w[0] * positions_t0[ids[1]] + w[1] * positions_t0[ids[2]] + w[2] * positions_t0[ids[3]]
+    vertices[first + i] = ids
+    weights[first + i] = wp.vec4(1.0, -w[0], -w[1], -w[2])
+    normals[first + i] = _normal_or_fallback(p - q, wp.cross(b - a, c - a), p0 - q0)
+
+
+@wp.kernel
+def _edge_edge_constraints(
+    # in:
+    pairs: wp.array(dtype=wp.vec4i),
+    toi: wp.array(dtype=float),
+    positions_t0: wp.array(dtype=wp.vec3),
+    positions_t1: wp.array(dtype=wp.vec3),
+    first: int,
+    # out:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    normals: wp.array(dtype=wp.vec3),
+):
+    """One thread per colliding edge-edge pair (a0, a1, b0, b1): its constraint at slot first + i."""
+    i = wp.tid()
+    ids = pairs[i]
+    s = toi[i]
+    a0 = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
+    a1 = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
+    b0 = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
+    b1 = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
+    st = edge_edge_closest_point(a0, a1, b0, b1)
+    pa = wp.lerp(a0, a1, st[0])
+    pb = wp.lerp(b0, b1, st[1])
+    start = (wp.lerp(positions_t0[ids[0]], positions_t0[ids[1]], st[0])
+             - wp.lerp(positions_t0[ids[2]], positions_t0[ids[3]], st[1]))
+    vertices[first + i] = ids
+    weights[first + i] = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
+    normals[first + i] = _normal_or_fallback(pa - pb, wp.cross(a1 - a0, b1 - b0), start)
+
+
+@wp.kernel
+def _weight_sums(
+    # in:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    # out:
+    weight_sum: wp.array(dtype=float),
+):
+    """One thread per constraint: S_i += |w_ki| for its four vertices."""
+    k = wp.tid()
+    ids = vertices[k]
+    w = weights[k]
+    for j in range(4):
+        wp.atomic_add(weight_sum, ids[j], wp.abs(w[j]))
+
+
+@wp.kernel
+def _dual_steps(
+    # in:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    inverse_mass: wp.array(dtype=float),
+    weight_sum: wp.array(dtype=float),
+    # out:
+    step: wp.array(dtype=float),
+):
+    """One thread per constraint: 1 / D_k (0 when every vertex is kinematic)."""
+    k = wp.tid()
+    ids = vertices[k]
+    w = weights[k]
+    bound = float(0.0)
+    for j in range(4):
+        bound += wp.abs(w[j]) * inverse_mass[ids[j]] * weight_sum[ids[j]]
+    if bound > 0.0:
+        step[k] = 1.0 / bound
+    else:
+        step[k] = 0.0
+
+
+@wp.kernel
+def _dual_update(
+    # in:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    normals: wp.array(dtype=wp.vec3),
+    step: wp.array(dtype=float),
+    positions_t1: wp.array(dtype=wp.vec3),
+    separation: float,
+    # in/out:
+    multiplier: wp.array(dtype=float),
+    # out:
+    change: wp.array(dtype=float),
+    violation: wp.array(dtype=float),
+):
+    """One thread per constraint: projected dual step; records the change of lambda and the largest
+    gap deficit (before the step)."""
+    k = wp.tid()
+    if step[k] == 0.0:
+        change[k] = 0.0
+        return
+    ids = vertices[k]
+    w = weights[k]
+    n = normals[k]
+    gap = float(0.0)
+    for j in range(4):
+        gap += w[j] * wp.dot(n, positions_t1[ids[j]])
+    deficit = separation - gap
+    wp.atomic_max(violation, 0, deficit)
+    old = multiplier[k]
+    new = wp.max(old + deficit * step[k], 0.0)
+    multiplier[k] = new
+    change[k] = new - old
+
+
+@wp.kernel
+def _primal_update(
+    # in:
+    vertices: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    normals: wp.array(dtype=wp.vec3),
+    change: wp.array(dtype=float),
+    inverse_mass: wp.array(dtype=float),
+    # out:
+    positions_t1: wp.array(dtype=wp.vec3),
+):
+    """One thread per constraint: x += M^-1 w_k n_k (change of lambda_k)."""
+    k = wp.tid()
+    delta = change[k]
+    if delta == 0.0:
+        return
+    ids = vertices[k]
+    w = weights[k]
+    n = normals[k]
+    for j in range(4):
+        scale = inverse_mass[ids[j]] * w[j] * delta
+        if scale != 0.0:
+            wp.atomic_add(positions_t1, ids[j], scale * n)
+
+
+@dataclass(frozen=True)
+class ProjectionResult:
+    """What one :meth:`InelasticProjection.solve` did."""
+
+    iterations: int
+    """Dual iterations run."""
+    violation: float
+    """Largest gap deficit ``separation - g_k`` at the last check [m] (<= tolerance: converged)."""
+    constraints: int
+    """Constraints of the step so far."""
+
+
+class InelasticProjection:
+    """Inelastic projection of the end positions onto the step's collision constraints (see the
+    module docstring).
+
+    Use per step: :meth:`reset`, then per CCD round :meth:`add` the colliding pairs and
+    :meth:`solve`.
+
+    Args:
+        inverse_mass: (vertex_count,) 1 / mass [1/kg] in the collision index space; 0 for kinematic
+            vertices (pins, handles, obstacles), which are never moved.
+        device: Warp device.
+        max_iterations: dual iterations per :meth:`solve` at most.
+        check_every: iterations between two convergence checks (each check reads one float back).
+    """
+
+    def __init__(self, inverse_mass: np.ndarray, device: wp.Device, max_iterations: int = 512,
+                 check_every: int = 16) -> None:
+        self.device = device
+        self.vertex_count = int(inverse_mass.shape[0])
+        self.inverse_mass = wp.array(np.asarray(inverse_mass, dtype=np.float32), dtype=float, device=device)
+        self.max_iterations = int(max_iterations)
+        self.check_every = max(1, int(check_every))
+        self.weight_sum = wp.zeros(self.vertex_count, dtype=float, device=device)
+        self.violation = wp.zeros(1, dtype=float, device=device)
+        self.count = 0
+        self._allocate(64)
+
+    def _allocate(self, capacity: int) -> None:
+        dev = self.device
+        self.capacity = int(capacity)
+        self.vertices = wp.zeros(capacity, dtype=wp.vec4i, device=dev)
+        self.weights = wp.zeros(capacity, dtype=wp.vec4, device=dev)
+        self.normals = wp.zeros(capacity, dtype=wp.vec3, device=dev)
+        self.multiplier = wp.zeros(capacity, dtype=float, device=dev)
+        self.step = wp.zeros(capacity, dtype=float, device=dev)
+        self.change = wp.zeros(capacity, dtype=float, device=dev)
+
+    def _grow(self, needed: int) -> None:
+        if needed <= self.capacity:
+            return
+        old = (self.vertices, self.weights, self.normals, self.multiplier)
+        self._allocate(max(needed, 2 * self.capacity))
+        for src, dst in zip(old, (self.vertices, self.weights, self.normals, self.multiplier), strict=True):
+            if self.count:
+                wp.copy(dst, src, count=self.count)
+
+    def reset(self) -> None:
+        """Forget the constraints (start of a step). Allocates: no."""
+        self.count = 0
+
+    def add(self, vertex_face: np.ndarray, vertex_face_toi: np.ndarray, edge_edge: np.ndarray,
+            edge_edge_toi: np.ndarray, positions_t0: wp.array, positions_t1: wp.array) -> None:
+        """Append one constraint per colliding pair, linearised at its time of impact on the current
+        trajectory ``positions_t0 -> positions_t1``.
+
+        Args:
+            vertex_face: (k, 4) int rows (vertex, face vertex a, b, c).
+            vertex_face_toi: (k,) time of impact in [0, 1].
+            edge_edge: (l, 4) int rows (a0, a1, b0, b1).
+            edge_edge_toi: (l,) time of impact.
+            positions_t0: start positions (device, vec3).
+            positions_t1: current end positions (device, vec3).
+
+        Allocates: uploads the pairs; grows the constraint buffers (doubling) when full.
+        """
+        added = int(vertex_face.shape[0]) + int(edge_edge.shape[0])
+        self._grow(self.count + added)
+        dev = self.device
+        for kernel, rows, toi in ((_vertex_face_constraints, vertex_face, vertex_face_toi),
+                                  (_edge_edge_constraints, edge_edge, edge_edge_toi)):
+            if rows.shape[0] == 0:
+                continue
+            pairs = wp.array(np.ascontiguousarray(rows, dtype=np.int32), dtype=wp.vec4i, device=dev)
+            times = wp.array(np.ascontiguousarray(toi, dtype=np.float32), dtype=float, device=dev)
+            wp.launch(kernel, dim=rows.shape[0], inputs=[pairs, times, positions_t0, positions_t1, self.count],
+                      outputs=[self.vertices, self.weights, self.normals], device=dev)
+            self.multiplier[self.count:self.count + rows.shape[0]].zero_()
+            self.count += int(rows.shape[0])
+
+    def solve(self, positions_t1: wp.array, separation: float, tolerance: float) -> ProjectionResult:
+        """Project ``positions_t1`` (updated in place) onto every constraint added since :meth:`reset`.
+
+        The multipliers of earlier constraints are kept (warm start), and ``positions_t1`` must be
+        the previous :meth:`solve`'s output (or the integrator's end positions after :meth:`reset`),
+        so the result is the projection of the integrator's end positions.
+
+        Args:
+            positions_t1: end positions (device, vec3), updated in place.
+            separation: gap each constraint asks for along its normal [m].
+            tolerance: stop when no gap is more than this below ``separation`` [m].
+
+        Returns:
+            Iterations run and the violation measured at the last check (before that iteration's
+            update).
+
+        Allocates: no. Capture-safe: no (reads the violation back every ``check_every`` iterations).
+        """
+        count = self.count
+        if count == 0:
+            return ProjectionResult(0, 0.0, 0)
+        dev = self.device
+        self.weight_sum.zero_()
+        constraint = (self.vertices, self.weights)
+        wp.launch(_weight_sums, dim=count, inputs=list(constraint), outputs=[self.weight_sum], device=dev)
+        wp.launch(_dual_steps, dim=count, inputs=[*constraint, self.inverse_mass, self.weight_sum],
+                  outputs=[self.step], device=dev)
+        iterations = 0
+        violation = float("inf")
+        while iterations < self.max_iterations:
+            check = (iterations % self.check_every == 0) or iterations + 1 == self.max_iterations
+            if check:
+                self.violation.fill_(-np.inf)
+            wp.launch(_dual_update, dim=count,
+                      inputs=[*constraint, self.normals, self.step, positions_t1, float(separation)],
+                      outputs=[self.multiplier, self.change, self.violation], device=dev)
+            # The positions always follow the multipliers, so a later solve can warm-start.
+            wp.launch(_primal_update, dim=count,
+                      inputs=[*constraint, self.normals, self.change, self.inverse_mass],
+                      outputs=[positions_t1], device=dev)
+            iterations += 1
+            if check:
+                violation = float(self.violation.numpy()[0])
+                if violation <= tolerance:
+                    break
+        return ProjectionResult(iterations, violation, count)
