@@ -127,6 +127,7 @@ class CollisionDetector:
         self._cell_size_factor = float(cell_size_factor)
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
+        self._last_ccd_thickness: float | None = None
         self.topology: MeshTopology | None = None
         self.front: NormalConeFront | None = None
         self.bvh: MaterialBvh | None = None
@@ -301,14 +302,23 @@ class CollisionDetector:
         self._broad_mode = "ccd" if x1 is not None else "dcd"
         self._broad_thickness = h
         self._broad_stats = stats
+        self._last_ccd_thickness = None  # the candidates changed: no result to reuse
         return stats
 
-    def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> CollisionResult:
+    def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0,
+                     moved: np.ndarray | None = None) -> CollisionResult:
         """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
 
         The caller is responsible for the candidates covering these positions: boxes of the
         broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it: CCD
         over the same step, then DCD at its end positions).
+
+        ``moved`` (CCD only; the penetration-response loop): a (vertex_count,) bool mask of the
+        vertices whose end positions changed since the previous CCD narrow phase, which must have
+        had the same start positions. Only the candidates with a marked vertex are tested again; the
+        others keep their previous result, which is exact because their trajectories are unchanged.
+        The mask is ignored (everything is tested) when no CCD narrow phase with this thickness ran
+        since the last broad phase.
 
         Raises:
             InputError: no broad phase has run, CCD after a discrete broad phase, or a thickness
@@ -324,18 +334,27 @@ class CollisionDetector:
             raise InputError("argument", "thickness",
                              f"{h:g} exceeds the broad phase's thickness {self._broad_thickness:g}",
                              "run broad_phase() with at least the thickness the narrow phase uses")
-        return self._narrow(x0, x1, h, upload=True)
+        marks = None
+        if moved is not None and x1 is not None and self._last_ccd_thickness == h:
+            moved = np.asarray(moved)
+            if moved.shape != (x0.shape[0],):
+                raise InputError("argument", "moved", f"has shape {moved.shape}, expected ({x0.shape[0]},)",
+                                 "pass one bool per vertex")
+            marks = wp.array(moved.astype(np.int32), dtype=wp.int32, device=self.device)
+        return self._narrow(x0, x1, h, upload=True, moved=marks)
 
-    def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool) -> CollisionResult:
+    def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool,
+                moved: wp.array | None = None) -> CollisionResult:
         """Narrow phase on the current candidates; ``upload=False`` reuses the positions the broad
-        phase just copied to the device."""
+        phase just copied to the device; ``moved`` marks the vertices to test again (CCD only)."""
         mark = time.perf_counter()
         if upload:
             self._positions_t0.assign(x0)
             if x1 is not None:
                 self._positions_t1.assign(x1)
         positions_t1 = self._positions_t1 if x1 is not None else self._positions_t0
-        self.narrow.run(self.candidates, self._positions_t0, positions_t1, h)
+        self.narrow.run(self.candidates, self._positions_t0, positions_t1, h, moved=moved)
+        self._last_ccd_thickness = h if x1 is not None else None
         wp.synchronize_device(self.device)
         narrow_seconds = time.perf_counter() - mark
         mark = time.perf_counter()

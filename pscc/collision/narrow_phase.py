@@ -35,14 +35,20 @@ def _vertex_face_narrow(
     positions_t1: wp.array(dtype=wp.vec3),
     thickness: float,
     params: CcdParameters,
+    moved: wp.array(dtype=wp.int32),
+    only_moved: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
 ):
-    """One thread per vertex-face candidate."""
+    """One thread per vertex-face candidate. With ``only_moved``, a pair none of whose vertices is
+    marked in ``moved`` keeps its previous result (its trajectory has not changed)."""
     i = wp.tid()
     pair = pairs[i]
     v = pair[0]
     f = faces[pair[1]]
+    if only_moved != 0:
+        if moved[v] + moved[f[0]] + moved[f[1]] + moved[f[2]] == 0:
+            return
     toi_out[i] = vertex_face_ccd_toi(
         positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
         positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
@@ -59,14 +65,19 @@ def _edge_edge_narrow(
     positions_t1: wp.array(dtype=wp.vec3),
     thickness: float,
     params: CcdParameters,
+    moved: wp.array(dtype=wp.int32),
+    only_moved: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
 ):
-    """One thread per edge-edge candidate."""
+    """One thread per edge-edge candidate (``moved``, ``only_moved``: as for vertex-face)."""
     i = wp.tid()
     pair = pairs[i]
     a = edges[pair[0]]
     b = edges[pair[1]]
+    if only_moved != 0:
+        if moved[a[0]] + moved[a[1]] + moved[b[0]] + moved[b[1]] == 0:
+            return
     toi_out[i] = edge_edge_ccd_toi(
         positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
         positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
@@ -183,6 +194,7 @@ class NarrowPhase:
         self.proximity = proximity_parameters()
         self.vertex_face_toi = wp.empty(1, dtype=wp.float32, device=device)
         self.edge_edge_toi = wp.empty(1, dtype=wp.float32, device=device)
+        self._no_marks = wp.zeros(1, dtype=wp.int32, device=device)
 
     @property
     def device_bytes(self) -> int:
@@ -195,8 +207,14 @@ class NarrowPhase:
         positions_t0: wp.array,
         positions_t1: wp.array,
         thickness: float,
+        moved: wp.array | None = None,
     ) -> None:
         """Test the first ``count`` candidates of each kind (counts read by ``candidates.fits()``).
+
+        ``moved`` (CCD only): per-vertex int32 marks; when given, only pairs with a marked vertex are
+        tested again and the others keep the time of impact of the previous run, which must have been
+        a CCD run on the same candidates, start positions and thickness (the caller's contract: only
+        the marked vertices' end positions changed since).
 
         Allocates: only when the candidate buffers grew. Capture-safe: no (sizes come from the host).
         """
@@ -209,15 +227,17 @@ class NarrowPhase:
         if positions_t1 is positions_t0:
             self._proximity(candidates, positions_t0, thickness)
             return
+        only_moved = int(moved is not None)
+        marks = moved if moved is not None else self._no_marks
         if vf > 0:
             wp.launch(_vertex_face_narrow, dim=vf,
                       inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1,
-                              float(thickness), self.params],
+                              float(thickness), self.params, marks, only_moved],
                       outputs=[self.vertex_face_toi], device=self.device)
         if ee > 0:
             wp.launch(_edge_edge_narrow, dim=ee,
                       inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1,
-                              float(thickness), self.params],
+                              float(thickness), self.params, marks, only_moved],
                       outputs=[self.edge_edge_toi], device=self.device)
 
     def _proximity(self, candidates: CandidatePairs, positions: wp.array, thickness: float) -> None:

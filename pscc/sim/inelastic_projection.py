@@ -23,19 +23,23 @@ zone, the colliding cloth keeps deforming and can slide along a kinematic object
 region that touches two differently moving objects (a spinning ball and a held corner) is solved
 instead of failing.
 
-**Solver.** The dual of this quadratic programme is solved by projected gradient ascent, one
-thread per constraint (Jacobi, so the result does not depend on the order of the pairs):
-``x = x~ + M^-1 A^T lambda``, and every iteration sets
+**Solver.** The dual of this quadratic programme is solved by accelerated projected gradient
+ascent (FISTA, Beck and Teboulle 2009, with the adaptive restart of O'Donoghue and Candes 2015), one
+thread per constraint (Jacobi, so the result does not depend on the order of the pairs). With
+``x(y) = x~ + M^-1 A^T y``, every iteration sets
 
-    lambda_k <- max(0, lambda_k - (g_k(x) - separation) / D_k),   D_k = sum_i |w_ki| m_i^-1 S_i,
+    lambda_k' = max(0, y_k - (g_k(x(y)) - separation) / D_k),   y' = lambda' + beta (lambda' - lambda),
 
-where ``S_i = sum_{j touching i} |w_ji|``. ``D`` bounds every row sum of the dual Hessian
-``H = A M^-1 A^T`` (``|H_kj| <= sum_{i in k and j} |w_ki| |w_ji| / m_i``, unit normals), so the
-diagonal matrix ``D`` dominates ``H`` (Gershgorin) and every step increases the dual objective: the
-iteration converges to the projection whenever the constraints can be met. Iterations stop when
-every gap is within ``tolerance`` of ``separation`` (checked every few iterations) or after
-``max_iterations``. The solver then runs CCD again; constraints it cannot meet (a free vertex
-squeezed between two kinematic objects) are left to the rigid impact zones
+    D_k = sum_i |w_ki| m_i^-1 S_i,   S_i = sum_{j touching i} |w_ji|.
+
+``D`` bounds every row sum of the dual Hessian ``H = A M^-1 A^T`` (``|H_kj| <= sum_{i in k and j}
+|w_ki| |w_ji| / m_i``, unit normals), so the diagonal matrix ``D`` dominates ``H`` (Gershgorin) and
+``1 / D_k`` is a safe step; ``beta`` follows the FISTA sequence and drops to 0 when the momentum points
+uphill (checked every few iterations). Iterations stop at the KKT conditions within ``tolerance``:
+no gap more than ``tolerance`` below ``separation`` and no constraint with a positive multiplier
+more than ``tolerance`` above it (stationarity holds by construction), or after ``max_iterations``.
+The solver then runs CCD again; constraints it cannot meet (a free vertex squeezed between two
+kinematic objects) are left to the rigid impact zones
 (:class:`pscc.sim.impact_response.ImpactZones`) and, at last, to a smaller step.
 
 Momentum: every constraint's correction ``M^-1 w_k n_k lambda_k`` has zero total momentum when all
@@ -180,14 +184,24 @@ def _dual_update(
     step: wp.array(dtype=float),
     positions_t1: wp.array(dtype=wp.vec3),
     separation: float,
+    momentum: float,
+    measure: int,
     # in/out:
     multiplier: wp.array(dtype=float),
+    extrapolated: wp.array(dtype=float),
     # out:
     change: wp.array(dtype=float),
     violation: wp.array(dtype=float),
+    restart: wp.array(dtype=float),
 ):
-    """One thread per constraint: projected dual step; records the change of lambda and the largest
-    gap deficit (before the step)."""
+    """One thread per constraint: one accelerated projected dual step.
+
+    ``positions_t1`` are the positions of the extrapolated multipliers y. The new multiplier is
+    lambda' = max(0, y + deficit / D_k), the new extrapolation y' = lambda' + momentum (lambda' - lambda);
+    ``change`` = y' - y for the primal update. When ``measure`` is not 0 it also records the largest
+    deficit (primal feasibility), the largest excess gap of a constraint with lambda' > 0
+    (complementarity) and the restart indicator sum (y - lambda') (lambda' - lambda) (> 0: the momentum
+    points uphill)."""
     k = wp.tid()
     if step[k] == 0.0:
         change[k] = 0.0
@@ -199,11 +213,33 @@ def _dual_update(
     for j in range(4):
         gap += w[j] * wp.dot(n, positions_t1[ids[j]])
     deficit = separation - gap
-    wp.atomic_max(violation, 0, deficit)
     old = multiplier[k]
-    new = wp.max(old + deficit * step[k], 0.0)
+    y = extrapolated[k]
+    new = wp.max(y + deficit * step[k], 0.0)
+    if measure != 0:
+        wp.atomic_max(violation, 0, deficit)
+        if new > 0.0:
+            wp.atomic_max(violation, 1, -deficit)
+        wp.atomic_add(restart, 0, (y - new) * (new - old))
+    y_new = new + momentum * (new - old)
     multiplier[k] = new
-    change[k] = new - old
+    extrapolated[k] = y_new
+    change[k] = y_new - y
+
+
+@wp.kernel
+def _settle(
+    # in:
+    multiplier: wp.array(dtype=float),
+    # in/out:
+    extrapolated: wp.array(dtype=float),
+    # out:
+    change: wp.array(dtype=float),
+):
+    """One thread per constraint: drop the momentum (y = lambda); ``change`` = lambda - y."""
+    k = wp.tid()
+    change[k] = multiplier[k] - extrapolated[k]
+    extrapolated[k] = multiplier[k]
 
 
 @wp.kernel
@@ -238,7 +274,9 @@ class ProjectionResult:
     iterations: int
     """Dual iterations run."""
     violation: float
-    """Largest gap deficit ``separation - g_k`` at the last check [m] (<= tolerance: converged)."""
+    """At the last check [m]: the larger of the largest gap deficit ``separation - g_k`` and the
+    largest excess ``g_k - separation`` of a constraint with a positive multiplier (<= tolerance:
+    converged to the projection within tolerance)."""
     constraints: int
     """Constraints of the step so far."""
 
@@ -266,7 +304,8 @@ class InelasticProjection:
         self.max_iterations = int(max_iterations)
         self.check_every = max(1, int(check_every))
         self.weight_sum = wp.zeros(self.vertex_count, dtype=float, device=device)
-        self.violation = wp.zeros(1, dtype=float, device=device)
+        self.violation = wp.zeros(2, dtype=float, device=device)
+        self.restart = wp.zeros(1, dtype=float, device=device)
         self.count = 0
         self._allocate(64)
 
@@ -277,15 +316,17 @@ class InelasticProjection:
         self.weights = wp.zeros(capacity, dtype=wp.vec4, device=dev)
         self.normals = wp.zeros(capacity, dtype=wp.vec3, device=dev)
         self.multiplier = wp.zeros(capacity, dtype=float, device=dev)
+        self.extrapolated = wp.zeros(capacity, dtype=float, device=dev)
         self.step = wp.zeros(capacity, dtype=float, device=dev)
         self.change = wp.zeros(capacity, dtype=float, device=dev)
 
     def _grow(self, needed: int) -> None:
         if needed <= self.capacity:
             return
-        old = (self.vertices, self.weights, self.normals, self.multiplier)
+        old = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
         self._allocate(max(needed, 2 * self.capacity))
-        for src, dst in zip(old, (self.vertices, self.weights, self.normals, self.multiplier), strict=True):
+        new = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
+        for src, dst in zip(old, new, strict=True):
             if self.count:
                 wp.copy(dst, src, count=self.count)
 
@@ -320,6 +361,7 @@ class InelasticProjection:
             wp.launch(kernel, dim=rows.shape[0], inputs=[pairs, times, positions_t0, positions_t1, self.count],
                       outputs=[self.vertices, self.weights, self.normals], device=dev)
             self.multiplier[self.count:self.count + rows.shape[0]].zero_()
+            self.extrapolated[self.count:self.count + rows.shape[0]].zero_()
             self.count += int(rows.shape[0])
 
     def solve(self, positions_t1: wp.array, separation: float, tolerance: float) -> ProjectionResult:
@@ -332,7 +374,9 @@ class InelasticProjection:
         Args:
             positions_t1: end positions (device, vec3), updated in place.
             separation: gap each constraint asks for along its normal [m].
-            tolerance: stop when no gap is more than this below ``separation`` [m].
+            tolerance: stop when no gap is more than this below ``separation``, and no constraint with
+                a positive multiplier has a gap more than this above it [m] (the KKT conditions:
+                ``x = x~ + M^-1 A^T lambda`` holds by construction).
 
         Returns:
             Iterations run and the violation measured at the last check (before that iteration's
@@ -351,20 +395,34 @@ class InelasticProjection:
                   outputs=[self.step], device=dev)
         iterations = 0
         violation = float("inf")
+        momentum_step = 1.0  # the FISTA sequence t_k; 1 = no momentum (start, restart)
         while iterations < self.max_iterations:
             check = (iterations % self.check_every == 0) or iterations + 1 == self.max_iterations
             if check:
                 self.violation.fill_(-np.inf)
+                self.restart.zero_()
+            following = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * momentum_step * momentum_step))
+            momentum = (momentum_step - 1.0) / following
+            momentum_step = following
             wp.launch(_dual_update, dim=count,
-                      inputs=[*constraint, self.normals, self.step, positions_t1, float(separation)],
-                      outputs=[self.multiplier, self.change, self.violation], device=dev)
-            # The positions always follow the multipliers, so a later solve can warm-start.
+                      inputs=[*constraint, self.normals, self.step, positions_t1, float(separation), float(momentum),
+                              int(check)],
+                      outputs=[self.multiplier, self.extrapolated, self.change, self.violation, self.restart],
+                      device=dev)
+            # The positions always follow the extrapolated multipliers.
             wp.launch(_primal_update, dim=count,
                       inputs=[*constraint, self.normals, self.change, self.inverse_mass],
                       outputs=[positions_t1], device=dev)
             iterations += 1
             if check:
-                violation = float(self.violation.numpy()[0])
+                deficit, excess = (float(v) for v in self.violation.numpy())
+                violation = max(deficit, excess)
                 if violation <= tolerance:
                     break
+                if self.restart.numpy()[0] > 0.0:
+                    momentum_step = 1.0  # adaptive restart (O'Donoghue and Candes 2015)
+        # Back to the positions of the multipliers themselves, so a later solve can warm-start.
+        wp.launch(_settle, dim=count, inputs=[self.multiplier], outputs=[self.extrapolated, self.change], device=dev)
+        wp.launch(_primal_update, dim=count, inputs=[*constraint, self.normals, self.change, self.inverse_mass],
+                  outputs=[positions_t1], device=dev)
         return ProjectionResult(iterations, violation, count)
