@@ -128,6 +128,8 @@ class CollisionDetector:
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
         self._last_ccd_thickness: float | None = None
+        self._previous_t0: wp.array | None = None
+        self._previous_t1: wp.array | None = None
         self.topology: MeshTopology | None = None
         self.front: NormalConeFront | None = None
         self.bvh: MaterialBvh | None = None
@@ -306,19 +308,19 @@ class CollisionDetector:
         return stats
 
     def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0,
-                     moved: np.ndarray | None = None) -> CollisionResult:
+                     recheck: bool = False) -> CollisionResult:
         """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
 
         The caller is responsible for the candidates covering these positions: boxes of the
         broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it: CCD
         over the same step, then DCD at its end positions).
 
-        ``moved`` (CCD only; the penetration-response loop): a (vertex_count,) bool mask of the
-        vertices whose end positions changed since the previous CCD narrow phase, which must have
-        had the same start positions. Only the candidates with a marked vertex are tested again; the
-        others keep their previous result, which is exact because their trajectories are unchanged.
-        The mask is ignored (everything is tested) when no CCD narrow phase with this thickness ran
-        since the last broad phase.
+        ``recheck`` (CCD only; the penetration-response loop, where a response changes a few end
+        positions between CCD rounds): when the previous narrow phase was a CCD with this thickness
+        on the same candidates, only the candidates with a vertex whose start or end position
+        changed since (compared on the device, bit for bit) are tested again; the others keep their
+        previous result, which is exact because their trajectories are unchanged. Otherwise
+        everything is tested.
 
         Raises:
             InputError: no broad phase has run, CCD after a discrete broad phase, or a thickness
@@ -334,19 +336,27 @@ class CollisionDetector:
             raise InputError("argument", "thickness",
                              f"{h:g} exceeds the broad phase's thickness {self._broad_thickness:g}",
                              "run broad_phase() with at least the thickness the narrow phase uses")
-        marks = None
-        if moved is not None and x1 is not None and self._last_ccd_thickness == h:
-            moved = np.asarray(moved)
-            if moved.shape != (x0.shape[0],):
-                raise InputError("argument", "moved", f"has shape {moved.shape}, expected ({x0.shape[0]},)",
-                                 "pass one bool per vertex")
-            marks = wp.array(moved.astype(np.int32), dtype=wp.int32, device=self.device)
-        return self._narrow(x0, x1, h, upload=True, moved=marks)
+        if recheck and x1 is not None and self._last_ccd_thickness == h:
+            mark = time.perf_counter()
+            if self._previous_t0 is None or self._previous_t0.shape[0] != x0.shape[0]:
+                self._previous_t0 = wp.empty_like(self._positions_t0)
+                self._previous_t1 = wp.empty_like(self._positions_t1)
+            wp.copy(self._previous_t0, self._positions_t0)
+            wp.copy(self._previous_t1, self._positions_t1)
+            self._positions_t0.assign(x0)
+            self._positions_t1.assign(x1)
+            moved = self.narrow.mark_moved(self._previous_t0, self._positions_t0, self._previous_t1,
+                                           self._positions_t1)
+            marking = time.perf_counter() - mark
+            result = self._narrow(x0, x1, h, upload=False, moved=moved)
+            result.stats["narrow_phase"] += marking
+            return result
+        return self._narrow(x0, x1, h, upload=True)
 
     def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool,
                 moved: wp.array | None = None) -> CollisionResult:
-        """Narrow phase on the current candidates; ``upload=False`` reuses the positions the broad
-        phase just copied to the device; ``moved`` marks the vertices to test again (CCD only)."""
+        """Narrow phase on the current candidates; ``upload=False`` reuses the positions already on
+        the device; ``moved`` marks the vertices to test again (CCD only)."""
         mark = time.perf_counter()
         if upload:
             self._positions_t0.assign(x0)
@@ -409,7 +419,8 @@ class CollisionDetector:
             + self._positions_t0.capacity + self._positions_t1.capacity,
             "boxes": self.boxes.device_bytes,
             "candidates": self.candidates.device_bytes,
-            "narrow_phase": self.narrow.device_bytes,
+            "narrow_phase": self.narrow.device_bytes + sum(
+                a.capacity for a in (self._previous_t0, self._previous_t1) if a is not None),
         }
         if self.method != "brute-force":
             sizes["spatial_hash"] = int(sum(self.spatial_hash.device_bytes.values()))

@@ -85,6 +85,29 @@ def _edge_edge_narrow(
     )
 
 
+@wp.kernel
+def _mark_moved(
+    # in:
+    old_t0: wp.array(dtype=wp.vec3),
+    new_t0: wp.array(dtype=wp.vec3),
+    old_t1: wp.array(dtype=wp.vec3),
+    new_t1: wp.array(dtype=wp.vec3),
+    # out:
+    moved: wp.array(dtype=wp.int32),
+):
+    """One thread per vertex: 1 when its start or end position differs from the last CCD run's."""
+    v = wp.tid()
+    a = old_t0[v]
+    b = new_t0[v]
+    c = old_t1[v]
+    d = new_t1[v]
+    same = a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and c[0] == d[0] and c[1] == d[1] and c[2] == d[2]
+    if same:
+        moved[v] = 1
+    else:
+        moved[v] = 1
+
+
 @wp.struct
 class ProximityParameters:
     """Bounds of the closed-form distance fast path of discrete proximity (see :class:`NarrowPhase`)."""
@@ -195,11 +218,23 @@ class NarrowPhase:
         self.vertex_face_toi = wp.empty(1, dtype=wp.float32, device=device)
         self.edge_edge_toi = wp.empty(1, dtype=wp.float32, device=device)
         self._no_marks = wp.zeros(1, dtype=wp.int32, device=device)
+        self.moved = wp.zeros(0, dtype=wp.int32, device=device)
 
     @property
     def device_bytes(self) -> int:
         """Bytes held on the device."""
-        return self.vertex_face_toi.capacity + self.edge_edge_toi.capacity
+        return self.vertex_face_toi.capacity + self.edge_edge_toi.capacity + self.moved.capacity
+
+    def mark_moved(self, old_t0: wp.array, new_t0: wp.array, old_t1: wp.array, new_t1: wp.array) -> wp.array:
+        """Per-vertex int32 marks (``self.moved``): 1 where the start or end position changed.
+
+        Allocates: once per vertex count. Capture-safe: yes after the first call.
+        """
+        if self.moved.shape[0] != old_t0.shape[0]:
+            self.moved = wp.zeros(old_t0.shape[0], dtype=wp.int32, device=self.device)
+        wp.launch(_mark_moved, dim=old_t0.shape[0], inputs=[old_t0, new_t0, old_t1, new_t1], outputs=[self.moved],
+                  device=self.device)
+        return self.moved
 
     def run(
         self,
@@ -211,10 +246,10 @@ class NarrowPhase:
     ) -> None:
         """Test the first ``count`` candidates of each kind (counts read by ``candidates.fits()``).
 
-        ``moved`` (CCD only): per-vertex int32 marks; when given, only pairs with a marked vertex are
-        tested again and the others keep the time of impact of the previous run, which must have been
-        a CCD run on the same candidates, start positions and thickness (the caller's contract: only
-        the marked vertices' end positions changed since).
+        ``moved`` (CCD only): per-vertex int32 marks (:meth:`mark_moved`); when given, only pairs with
+        a marked vertex are tested again and the others keep the time of impact of the previous run,
+        which must have been a CCD run on the same candidates and thickness, with every vertex whose
+        start or end position changed since marked.
 
         Allocates: only when the candidate buffers grew. Capture-safe: no (sizes come from the host).
         """

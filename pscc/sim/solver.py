@@ -368,13 +368,10 @@ class ClothSolver:
         rounds = 0
         self.projection.reset()
         tolerance = 0.5 * (self.separation - self.ccd_distance)
-        tested: np.ndarray | None = None  # the end positions of the last CCD round
         while True:
             mark = time.perf_counter()
-            # Only pairs with a vertex the response moved can change their result (exact re-check).
-            moved = None if tested is None else np.any(x1 != tested, axis=1)
-            result = self.detector.narrow_phase(x0, x1, self.ccd_distance, moved=moved)
-            tested = x1
+            # After a response, only pairs with a vertex it moved are tested again (exact re-check).
+            result = self.detector.narrow_phase(x0, x1, self.ccd_distance, recheck=True)
             seconds["narrow_phase"] += time.perf_counter() - mark
             counts["ccd_rounds"] += 1
             hits = result.vertex_face.shape[0] + result.edge_edge.shape[0]

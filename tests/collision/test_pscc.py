@@ -332,32 +332,41 @@ def test_narrow_phase_refuses_uncovered_queries() -> None:
 
 
 def test_ccd_recheck_of_moved_vertices_equals_a_full_run() -> None:
-    # The response loop changes some end positions and re-runs CCD with the moved vertices marked:
-    # the result must be the full CCD of the new trajectory, for every method.
+    # The response loop changes some end positions and re-runs CCD with recheck=True: only pairs
+    # with a changed vertex are tested again, and the result must be the full CCD of the new
+    # trajectory, for every method.
     mesh = folded_sheet(1200, layers=3, seed=7)
     rng = np.random.default_rng(7)
     h = 0.01
     for method in ("pscc", "spatial-hash", "brute-force"):
         det = CollisionDetector(mesh.faces, method=method, rest=mesh.rest)
-        # The broad phase covers the original and the perturbed trajectories (boxes grown by h).
         det.broad_phase(mesh.vertices, mesh.vertices_end, thickness=h)
-        first = det.narrow_phase(mesh.vertices, mesh.vertices_end, 0.0)
-        changed = mesh.vertices_end.copy()
-        picked = rng.choice(len(changed), size=len(changed) // 10, replace=False)
-        changed[picked] += rng.uniform(-0.3 * h, 0.3 * h, size=(len(picked), 3)).astype(np.float32)
-        moved = np.zeros(len(changed), dtype=bool)
-        moved[picked] = True
-        partial = det.narrow_phase(mesh.vertices, changed, 0.0, moved=moved)
-        full = det.narrow_phase(mesh.vertices, changed, 0.0)
-        assert _rows(partial) == _rows(full), method
-        np.testing.assert_array_equal(partial.vertex_face_toi, full.vertex_face_toi)
-        np.testing.assert_array_equal(partial.edge_edge_toi, full.edge_edge_toi)
-        # The perturbation changed some results, so the partial run had work to do.
-        assert (_rows(first) != _rows(full) or first.vertex_face_toi.shape != full.vertex_face_toi.shape
-                or not np.array_equal(first.vertex_face_toi, full.vertex_face_toi)
+        first = det.narrow_phase(mesh.vertices, mesh.vertices_end, 0.0, recheck=True)  # nothing to reuse yet
+        assert _rows(first) == _rows(CollisionDetector(mesh.faces, method="brute-force").detect(
+            mesh.vertices, mesh.vertices_end))
+        current = mesh.vertices_end
+        for round_ in range(3):
+            changed = current.copy()
+            picked = rng.choice(len(changed), size=len(changed) // 10, replace=False)
+            changed[picked] += rng.uniform(-0.3 * h, 0.3 * h, size=(len(picked), 3)).astype(np.float32)
+            partial = det.narrow_phase(mesh.vertices, changed, 0.0, recheck=True)
+            marked = int(det.narrow.moved.numpy().sum())
+            full = det.narrow_phase(mesh.vertices, changed, 0.0)
+            assert marked == len(picked), (method, round_)
+            assert _rows(partial) == _rows(full), (method, round_)
+            np.testing.assert_array_equal(partial.vertex_face_toi, full.vertex_face_toi)
+            np.testing.assert_array_equal(partial.edge_edge_toi, full.edge_edge_toi)
+            current = changed
+        # The perturbations changed some results, so the partial runs had work to do.
+        assert (_rows(first) != _rows(full) or not np.array_equal(first.vertex_face_toi, full.vertex_face_toi)
                 or not np.array_equal(first.edge_edge_toi, full.edge_edge_toi))
-        with pytest.raises(InputError, match="moved"):
-            det.narrow_phase(mesh.vertices, changed, 0.0, moved=np.zeros(3, bool))
-        # A mask after a new broad phase is ignored (nothing to reuse): still the full result.
-        det.broad_phase(mesh.vertices, changed, thickness=h)
-        assert _rows(det.narrow_phase(mesh.vertices, changed, 0.0, moved=np.zeros(len(changed), bool))) == _rows(full)
+        # A changed start position is marked too.
+        start = mesh.vertices.copy()
+        start[5] += np.float32(1e-4)
+        partial = det.narrow_phase(start, current, 0.0, recheck=True)
+        assert int(det.narrow.moved.numpy().sum()) == 1
+        assert _rows(partial) == _rows(det.narrow_phase(start, current, 0.0))
+        # After a new broad phase or a discrete narrow phase there is nothing to reuse: a full run.
+        det.narrow_phase(current, thickness=h)
+        det.broad_phase(mesh.vertices, current, thickness=h)
+        assert _rows(det.narrow_phase(mesh.vertices, current, 0.0, recheck=True)) == _rows(full)

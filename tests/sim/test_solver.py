@@ -279,3 +279,36 @@ def test_mesh_sequence_obstacle_with_impact_zones() -> None:
     contact = ContactConfig(projection_rounds=0)  # every collision goes through the impact zones
     solver, checker, history = _run(scene, 40, contact)
     assert _total(history, "zone_rounds") > 0
+
+
+def test_ccd_rechecks_in_the_response_loop_equal_full_ccd() -> None:
+    # Every CCD round after a response tests only the pairs with a moved vertex; wrap the detector
+    # so that each such round is compared with a full CCD of the same trajectory.
+    scene = build_scene("stack", 450)
+    solver = ClothSolver(scene, device="cpu")
+    detector = solver.detector
+    original = detector.narrow_phase
+    compared = []
+
+    def checked(x0, x1=None, thickness=0.0, recheck=False):
+        if x1 is None or not recheck:
+            return original(x0, x1, thickness, recheck=recheck)
+        reusable = detector._last_ccd_thickness == thickness
+        partial = original(x0, x1, thickness, recheck=True)
+        if reusable:
+            compared.append(int(detector.narrow.moved.numpy().sum()))
+        full = original(x0, x1, thickness)
+        assert _rows(partial) == _rows(full)
+        return full
+
+    detector.narrow_phase = checked
+    state, other = solver.initial_state(), solver.initial_state()
+    for _ in range(24):
+        solver.step(state, other, scene.time_step)
+        state, other = other, state
+    assert len(compared) >= 3 and 0 < max(compared) < len(state.positions.numpy())
+
+
+def _rows(result) -> tuple[list, list, list, list]:
+    return (result.vertex_face.tolist(), result.edge_edge.tolist(), result.vertex_face_toi.tolist(),
+            result.edge_edge_toi.tolist())
