@@ -95,17 +95,18 @@ def _mark_moved(
     # out:
     moved: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex: 1 when its start or end position differs from the last CCD run's."""
+    """One thread per vertex: 1 when its start or end position differs from the last CCD run's
+    (coordinate comparison: NaN counts as changed, -0 equals +0)."""
     v = wp.tid()
     a = old_t0[v]
     b = new_t0[v]
     c = old_t1[v]
     d = new_t1[v]
-    same = a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and c[0] == d[0] and c[1] == d[1] and c[2] == d[2]
-    if same:
-        moved[v] = 1
-    else:
-        moved[v] = 1
+    changed = int(0)
+    for k in range(3):
+        if a[k] != b[k] or c[k] != d[k]:
+            changed = 1
+    moved[v] = changed
 
 
 @wp.struct
