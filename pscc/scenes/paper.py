@@ -163,14 +163,19 @@ def sphere(scale: float) -> Scene:
 
 # ---------------------------------------------------------------------------------------------- twisting
 
-TWISTING_SPIN: float = math.pi
-"""Final angular speed of the ``twisting`` ball [rad/s] (half a turn per second)."""
+TWISTING_TURN: float = math.pi
+"""Total turn of the ``twisting`` ball about the vertical axis [rad] (half a turn)."""
 
 TWISTING_START: float = 1.0
-"""Time [s] the ``twisting`` ball starts spinning (when the cloths have draped)."""
+"""Time [s] the ``twisting`` ball starts turning (when the cloths have draped)."""
 
-TWISTING_RAMP: float = 0.5
-"""Time [s] the ``twisting`` ball takes to reach its final angular speed."""
+TWISTING_TURN_TIME: float = 1.5
+"""Time [s] the ``twisting`` ball takes for its turn (smoothstep: starts and stops at rest, peak
+angular speed 1.5 x TWISTING_TURN / TWISTING_TURN_TIME = half a turn per second)."""
+
+TWISTING_TACK_RADIUS: float = 0.05
+"""Radius [m] of the disc at the centre of each ``twisting`` cloth (in material space) that is
+stitched to the ball and turns with it."""
 
 TWISTING_FRICTION: float = 0.9
 """Friction coefficient of the ``twisting`` cloths (the default is 0.3)."""
@@ -179,21 +184,16 @@ TWISTING_CORNER_SHIFT: tuple[float, float] = (0.217, -0.33)
 """Inward (along x and y each) and vertical travel [m] of the ``twisting`` corners while draping."""
 
 
-def _ball_spin(t: float) -> Transform:
-    """The ``twisting`` ball: a turn about +z whose angular speed rises from 0 at TWISTING_START to
-    TWISTING_SPIN over TWISTING_RAMP (smoothstep), then stays constant."""
-    x = (float(t) - TWISTING_START) / TWISTING_RAMP
-    if x <= 0.0:
-        angle = 0.0
-    elif x < 1.0:
-        angle = TWISTING_SPIN * TWISTING_RAMP * (x**3 - 0.5 * x**4)  # integral of smoothstep
-    else:
-        angle = TWISTING_SPIN * (0.5 * TWISTING_RAMP + float(t) - TWISTING_START - TWISTING_RAMP)
+def _ball_turn(t: float) -> Transform:
+    """The ``twisting`` ball (and the stitched cloth centres): a turn about +z by TWISTING_TURN
+    between TWISTING_START and TWISTING_START + TWISTING_TURN_TIME, smoothstep in time."""
+    x = min(max((float(t) - TWISTING_START) / TWISTING_TURN_TIME, 0.0), 1.0)
+    angle = TWISTING_TURN * x * x * (3.0 - 2.0 * x)
     return rotation_from_axis_angle(np.array([0.0, 0.0, angle])), np.zeros(3)
 
 
 def twisting(scale: float) -> Scene:
-    """Three cloths twisting as the ball under them spins (200K triangles at scale 1).
+    """Three cloths twisting severely as the ball under them turns (200K triangles at scale 1).
 
     * cloths: three 1 m x 1 m horizontal sheets stacked 1 cm apart, the lowest 1 cm above the top of
       the ball (z = 0.31, 0.32, 0.33), centred on the ball's axis;
@@ -202,11 +202,14 @@ def twisting(scale: float) -> Scene:
       (z = -0.02 .. 0): the layers hang loosely over the ball (the path over the ball along a diagonal
       is 19 % shorter than the half diagonal), then the corners stay (point pins: the cloth can pivot
       about them);
-    * ball: radius 0.3 m, centre at the origin, spinning about the vertical axis: the angular speed
-      rises smoothly from 0 at 1.0 s to half a turn per second at 1.5 s and stays there;
-    * friction 0.9 (the default is 0.3; cloth on rubber): friction alone drags the layers round the
-      spinning ball against their held corners, so they twist (by about 20 degrees at 5K triangles)
-      and the ball slips under them, with the three layers sheared against each other all the time;
+    * centres: a disc of radius 5 cm at the centre of each sheet (material space) is stitched to the
+      top of the ball and turns with it, so the ball drives the twist (friction alone lets the ball
+      slip under the layers at about 20 degrees, see docs/scenes.md);
+    * ball: radius 0.3 m, centre at the origin, turning half a turn about the vertical axis from 1.0 s
+      to 2.5 s (smoothstep: from rest to half a turn per second and back to rest), then still: the
+      three layers twist against their held corners by over 100 degrees around the stitches and stay
+      twisted;
+    * friction 0.9 (the default is 0.3; cloth on rubber): the layers grip the ball and each other;
     * time: dt = 1/200 s (the paper's), 25 frames/s, 8 steps per frame.
     """
     scale = check_scale("twisting", scale)
@@ -225,10 +228,13 @@ def twisting(scale: float) -> Scene:
             motion = EasedMotion([0.0, 1.0], translations=np.stack([np.zeros(3), target]))
             ids = np.concatenate([corner + k * grid.shape[0] for k in range(3)])
             handles.append(Handle(ids, motion=motion, name=f"corner ({cx:g}, {cy:g})"))
+    centre = np.flatnonzero(np.linalg.norm(rest - rest.mean(axis=0), axis=1) <= TWISTING_TACK_RADIUS)
+    for k in range(3):
+        handles.append(Handle(centre + k * grid.shape[0], motion=_ball_turn, name=f"cloth {k} centre stitch"))
     vertices, faces, rest, object_ids = _stack(sheets)
     ball_vertices, ball_faces = icosphere(0.3, _sphere_subdivisions(scale))
-    ball = Obstacle(ball_vertices, ball_faces, motion=_ball_spin, name="ball")
-    return Scene(name="twisting", description="three cloths twist as the ball under them spins",
+    ball = Obstacle(ball_vertices, ball_faces, motion=_ball_turn, name="ball")
+    return Scene(name="twisting", description="three cloths twist severely as the ball under them turns",
                  vertices=vertices, faces=faces, rest=rest, object_ids=object_ids,
                  material=ClothMaterial(friction=TWISTING_FRICTION), handles=handles, obstacles=[ball],
                  frame_time=1.0 / 25.0, steps_per_frame=8)
