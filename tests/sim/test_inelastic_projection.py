@@ -180,3 +180,32 @@ def test_same_input_gives_the_same_output() -> None:
     first, _ = _project(x0, x1, np.ones(12), [rows], [toi], 0.01, "cpu", iterations=300)
     second, _ = _project(x0, x1, np.ones(12), [rows], [toi], 0.01, "cpu", iterations=300)
     np.testing.assert_array_equal(first, second)
+
+
+def test_contact_with_two_differently_moving_kinematic_objects_is_resolved(device: str) -> None:
+    # A free vertex (0) is hit from below by a rising face (1, 2, 3, one kinematic group) and touches a
+    # static face (4, 5, 6, another group) beside it. Rigid impact zones cannot move a zone that holds
+    # both groups; the projection moves only the free vertex and clears both collisions.
+    from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones
+
+    x0 = np.array([[0.2, 0.2, 0.01], [0, 0, 0], [1, 0, 0], [0, 1, 0],
+                   [0.25, -0.5, -0.5], [0.25, 0.5, -0.5], [0.25, 0.0, 0.5]], dtype=np.float32)
+    x1 = x0.copy()
+    x1[1:4, 2] += 0.03  # the lower face rises through the vertex
+    x1[0, 0] += 0.1  # the vertex moves sideways through the static face at x = 0.25
+    inverse_mass = np.array([1.0, 0, 0, 0, 0, 0, 0])
+    rows = np.array([[0, 1, 2, 3], [0, 4, 5, 6]])
+    hits, toi = vertex_face_ccd(np.stack([x0[r] for r in rows]), np.stack([x1[r] for r in rows]),
+                                minimum_distance=1e-4)
+    assert hits.all()
+    zones = ImpactZones(np.ones(7), np.array([-1, 0, 0, 0, 1, 1, 1]))
+    zones.merge(rows)
+    static = (np.eye(3), np.zeros(3))
+    rising = (np.eye(3), np.array([0.0, 0.0, 0.03]))
+    with pytest.raises(ImpactZoneFailure):
+        zones.apply(x0, x1, 0.01, {0: rising, 1: static}, scale=1.0)
+    result, projection = _project(x0, x1, inverse_mass, [rows], [np.asarray(toi)], 0.002, device)
+    np.testing.assert_array_equal(result[1:], x1[1:])
+    hits_after, _ = vertex_face_ccd(np.stack([x0[r] for r in rows]), np.stack([result[r] for r in rows]),
+                                    minimum_distance=1e-4)
+    assert not hits_after.any()
