@@ -181,6 +181,17 @@ def test_resolved_scene_toml_reproduces_a_builtin_run(tmp_path: Path) -> None:
             np.testing.assert_array_equal(a["vertices"], b["vertices"])
 
 
+def test_resolved_builtin_file_of_an_earlier_version_names_the_renamed_key(tmp_path: Path, capsys) -> None:
+    first = tmp_path / "first"
+    assert main(["simulate", "twist", "--frames", "1", "--scale", "0.05", "--out-dir", str(first),
+                 "--no-progress"]) == 0
+    old = tmp_path / "old.toml"
+    old.write_text((first / "scene.toml").read_text().replace("projection_rounds", "impulse_rounds"))
+    assert main(["simulate", str(old), "--out-dir", str(tmp_path / "again"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "contact.impulse_rounds" in err and "replaced by 'projection_rounds'" in err
+
+
 def test_simulate_scene_file_and_its_resolved_copy(tmp_path: Path) -> None:
     example = Path(__file__).resolve().parents[1] / "examples" / "drape.toml"
     out = tmp_path / "file"

@@ -65,8 +65,10 @@ def _config(cls: type, table: Any, source: str, key: str) -> Any:
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(table) - names)
     if unknown:
-        raise InputError(source, f"{key}.{unknown[0]}", "is not a field of " + cls.__name__,
-                         f"use one of {', '.join(sorted(names))}")
+        renamed = getattr(cls, "renamed_fields", {})
+        fix = (f"it was replaced by {renamed[unknown[0]]!r}" if unknown[0] in renamed
+               else f"use one of {', '.join(sorted(names))}")
+        raise InputError(source, f"{key}.{unknown[0]}", "is not a field of " + cls.__name__, fix)
     values = {k: (None if v == "auto" else tuple(v) if isinstance(v, list) else v) for k, v in table.items()}
     try:
         return cls(**values).validate()

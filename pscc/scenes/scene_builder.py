@@ -353,7 +353,10 @@ class SceneBuilder:
         """A frozen config dataclass from a table of its fields; returns (config, resolved table)."""
         table = self.table(raw, key, f"[{key}] with fields of {cls.__name__}")
         config_fields = {f.name: f for f in fields(cls)}
-        self.check_keys(table, config_fields, key)
+        renamed = getattr(cls, "renamed_fields", {})
+        hints = {old: f"it was replaced by {new!r}: write {new} = ... (docs/simulator.md)"
+                 for old, new in renamed.items()}
+        self.check_keys(table, config_fields, key, hints)
         values: dict[str, Any] = {}
         for name, value in table.items():
             values[name] = self.config_value(value, f"{key}.{name}", config_fields[name])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from pscc.collision.detector import METHODS
 from pscc.errors import InputError
@@ -15,6 +16,9 @@ class ContactConfig:
     Distances are fractions of the cloth thickness h (:attr:`pscc.sim.ClothMaterial.thickness`), so
     one setting works at every scale.
     """
+
+    renamed_fields: ClassVar[dict[str, str]] = {"impulse_rounds": "projection_rounds"}
+    """Fields of earlier versions and their replacements (scene files get a pointed error)."""
 
     method: str = "pscc"
     """Collision detection method of :class:`pscc.CollisionDetector` (``pscc``, ``spatial-hash`` or

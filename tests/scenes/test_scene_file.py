@@ -3,6 +3,7 @@ the resolved file round-trips, sequences interpolate and bad files say which key
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import tomllib
@@ -398,6 +399,8 @@ BAD_FILES: dict[str, tuple[str, str, str]] = {
     "unknown key with suggestion": ("[scene]\nframe_rat = 30\n" + SHEET, "scene.frame_rat",
                                     r"unknown key 'frame_rat'.*Fix: did you mean 'frame_rate'"),
     "unknown top-level table": ("[solvr]\ngravity = [0, 0, -1]\n" + SHEET, "solvr", r"did you mean 'solver'"),
+    "renamed contact key": ("[contact]\nimpulse_rounds = 3\n" + SHEET, "contact.impulse_rounds",
+                            r"replaced by 'projection_rounds'"),
     "unknown material key": (SHEET + "[cloth.material]\ndensty = 0.2\n", "cloth[0].material.densty",
                              r"did you mean 'density'"),
     "material key on the piece": (SHEET.replace("[cloth.sheet]", "density = 0.2\n[cloth.sheet]"),
@@ -481,7 +484,7 @@ def test_every_config_field_is_accepted(tmp_path: Path) -> None:
     """Each SolverConfig / ContactConfig / ClothMaterial field can be set (the format follows the dataclasses)."""
     spec = read_scene_file(EXAMPLE).spec
     assert list(spec["solver"]) == [f for f in SolverConfig.__dataclass_fields__]
-    assert list(spec["contact"]) == [f for f in ContactConfig.__dataclass_fields__]
+    assert list(spec["contact"]) == [f.name for f in dataclasses.fields(ContactConfig)]
     assert list(spec["cloth"][0]["material"]) == [f for f in ClothMaterial.__dataclass_fields__]
     text = SHEET + "[cloth.material]\n" + "".join(f"{f} = 0.01\n" for f in ClothMaterial.__dataclass_fields__)
     scene, _, _ = load_scene_file(_write(tmp_path, text))
