@@ -293,7 +293,7 @@ class InelasticProjection:
             vertices (pins, handles, obstacles), which are never moved.
         device: Warp device.
         max_iterations: dual iterations per :meth:`solve` at most.
-        check_every: iterations between two convergence checks (each check reads one float back).
+        check_every: iterations between two convergence checks (each check reads three floats back).
     """
 
     def __init__(self, inverse_mass: np.ndarray, device: wp.Device, max_iterations: int = 512,
