@@ -318,7 +318,7 @@ class CollisionDetector:
         ``recheck`` (CCD only; the penetration-response loop, where a response changes a few end
         positions between CCD rounds): when the previous narrow phase was a CCD with this thickness
         on the same candidates, only the candidates with a vertex whose start or end position
-        changed since (compared on the device, bit for bit) are tested again; the others keep their
+        changed since (compared on the device, coordinate by coordinate) are tested again; the others keep their
         previous result, which is exact because their trajectories are unchanged. Otherwise
         everything is tested.
 
