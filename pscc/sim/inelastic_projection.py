@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
+from pscc.geometry.contact_weights import pair_plane_normal, pair_weights, weighted_sum
 
 wp.set_module_options({"enable_backward": False})
 
@@ -76,64 +76,34 @@ def _normal_or_fallback(offset: wp.vec3, fallback: wp.vec3, start_offset: wp.vec
 
 
 @wp.kernel
-def _vertex_face_constraints(
+def _pair_constraints(
     # in:
     pairs: wp.array(dtype=wp.vec4i),
     toi: wp.array(dtype=float),
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
     first: int,
+    edge_edge: int,
     # out:
     vertices: wp.array(dtype=wp.vec4i),
     weights: wp.array(dtype=wp.vec4),
     normals: wp.array(dtype=wp.vec3),
 ):
-    """One thread per colliding vertex-face pair (p, a, b, c): its constraint at slot first + i."""
+    """One thread per colliding pair (vertex-face (p, a, b, c), or edge-edge (a0, a1, b0, b1) when
+    ``edge_edge`` is not 0): its constraint, linearised at the time of impact, at slot first + i."""
     i = wp.tid()
     ids = pairs[i]
     s = toi[i]
-    p = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
-    a = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
-    b = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
-    c = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
-    w = vertex_face_closest_point(p, a, b, c)
-    q = w[0] * a + w[1] * b + w[2] * c
-    p0 = positions_t0[ids[0]]
-    q0 = w[0] * positions_t0[ids[1]] + w[1] * positions_t0[ids[2]] + w[2] * positions_t0[ids[3]]
+    x0 = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
+    x1 = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
+    x2 = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
+    x3 = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
+    w = pair_weights(x0, x1, x2, x3, edge_edge)
+    start = weighted_sum(w, positions_t0[ids[0]], positions_t0[ids[1]], positions_t0[ids[2]], positions_t0[ids[3]])
     vertices[first + i] = ids
-    weights[first + i] = wp.vec4(1.0, -w[0], -w[1], -w[2])
-    normals[first + i] = _normal_or_fallback(p - q, wp.cross(b - a, c - a), p0 - q0)
-
-
-@wp.kernel
-def _edge_edge_constraints(
-    # in:
-    pairs: wp.array(dtype=wp.vec4i),
-    toi: wp.array(dtype=float),
-    positions_t0: wp.array(dtype=wp.vec3),
-    positions_t1: wp.array(dtype=wp.vec3),
-    first: int,
-    # out:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-):
-    """One thread per colliding edge-edge pair (a0, a1, b0, b1): its constraint at slot first + i."""
-    i = wp.tid()
-    ids = pairs[i]
-    s = toi[i]
-    a0 = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
-    a1 = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
-    b0 = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
-    b1 = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
-    st = edge_edge_closest_point(a0, a1, b0, b1)
-    pa = wp.lerp(a0, a1, st[0])
-    pb = wp.lerp(b0, b1, st[1])
-    start = (wp.lerp(positions_t0[ids[0]], positions_t0[ids[1]], st[0])
-             - wp.lerp(positions_t0[ids[2]], positions_t0[ids[3]], st[1]))
-    vertices[first + i] = ids
-    weights[first + i] = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
-    normals[first + i] = _normal_or_fallback(pa - pb, wp.cross(a1 - a0, b1 - b0), start)
+    weights[first + i] = w
+    normals[first + i] = _normal_or_fallback(weighted_sum(w, x0, x1, x2, x3),
+                                             pair_plane_normal(x0, x1, x2, x3, edge_edge), start)
 
 
 @wp.kernel
@@ -352,13 +322,13 @@ class InelasticProjection:
         added = int(vertex_face.shape[0]) + int(edge_edge.shape[0])
         self._grow(self.count + added)
         dev = self.device
-        for kernel, rows, toi in ((_vertex_face_constraints, vertex_face, vertex_face_toi),
-                                  (_edge_edge_constraints, edge_edge, edge_edge_toi)):
+        for kind, rows, toi in ((0, vertex_face, vertex_face_toi), (1, edge_edge, edge_edge_toi)):
             if rows.shape[0] == 0:
                 continue
             pairs = wp.array(np.ascontiguousarray(rows, dtype=np.int32), dtype=wp.vec4i, device=dev)
             times = wp.array(np.ascontiguousarray(toi, dtype=np.float32), dtype=float, device=dev)
-            wp.launch(kernel, dim=rows.shape[0], inputs=[pairs, times, positions_t0, positions_t1, self.count],
+            wp.launch(_pair_constraints, dim=rows.shape[0],
+                      inputs=[pairs, times, positions_t0, positions_t1, self.count, kind],
                       outputs=[self.vertices, self.weights, self.normals], device=dev)
             self.multiplier[self.count:self.count + rows.shape[0]].zero_()
             self.extrapolated[self.count:self.count + rows.shape[0]].zero_()

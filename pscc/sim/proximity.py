@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
+from pscc.geometry.contact_weights import pair_plane_normal, pair_weights, weighted_sum
 from pscc.sim.contact_springs import ContactSprings
 
 wp.set_module_options({"enable_backward": False})
@@ -33,52 +33,29 @@ def _unit_or(offset: wp.vec3, fallback: wp.vec3) -> wp.vec3:
 
 
 @wp.kernel
-def _vertex_face_contacts(
+def _pair_contacts(
     # in:
     pairs: wp.array(dtype=wp.vec4i),
     positions: wp.array(dtype=wp.vec3),
     first: int,
+    edge_edge: int,
     # out:
     vertices: wp.array(dtype=wp.vec4i),
     weights: wp.array(dtype=wp.vec4),
     normals: wp.array(dtype=wp.vec3),
 ):
-    """One thread per vertex-face pair (p, a, b, c): closest point, weights and normal."""
+    """One thread per pair (vertex-face (p, a, b, c), or edge-edge (a0, a1, b0, b1) when
+    ``edge_edge`` is not 0): closest-point weights and unit normal, at slot first + i."""
     i = wp.tid()
     ids = pairs[i]
-    p = positions[ids[0]]
-    a = positions[ids[1]]
-    b = positions[ids[2]]
-    c = positions[ids[3]]
-    w = vertex_face_closest_point(p, a, b, c)
-    q = w[0] * a + w[1] * b + w[2] * c
+    x0 = positions[ids[0]]
+    x1 = positions[ids[1]]
+    x2 = positions[ids[2]]
+    x3 = positions[ids[3]]
+    w = pair_weights(x0, x1, x2, x3, edge_edge)
     vertices[first + i] = ids
-    weights[first + i] = wp.vec4(1.0, -w[0], -w[1], -w[2])
-    normals[first + i] = _unit_or(p - q, wp.cross(b - a, c - a))
-
-
-@wp.kernel
-def _edge_edge_contacts(
-    # in:
-    pairs: wp.array(dtype=wp.vec4i),
-    positions: wp.array(dtype=wp.vec3),
-    first: int,
-    # out:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-):
-    """One thread per edge-edge pair (a0, a1, b0, b1): closest points, weights and normal."""
-    i = wp.tid()
-    ids = pairs[i]
-    a0 = positions[ids[0]]
-    a1 = positions[ids[1]]
-    b0 = positions[ids[2]]
-    b1 = positions[ids[3]]
-    st = edge_edge_closest_point(a0, a1, b0, b1)
-    vertices[first + i] = ids
-    weights[first + i] = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
-    normals[first + i] = _unit_or(wp.lerp(a0, a1, st[0]) - wp.lerp(b0, b1, st[1]), wp.cross(a1 - a0, b1 - b0))
+    weights[first + i] = w
+    normals[first + i] = _unit_or(weighted_sum(w, x0, x1, x2, x3), pair_plane_normal(x0, x1, x2, x3, edge_edge))
 
 
 class ProximityContacts:
@@ -120,10 +97,10 @@ class ProximityContacts:
         springs = self.springs
         total = vf.shape[0] + ee.shape[0]
         springs.ensure(total)
-        for kernel, rows, first in ((_vertex_face_contacts, vf, 0), (_edge_edge_contacts, ee, vf.shape[0])):
+        for kind, rows, first in ((0, vf, 0), (1, ee, vf.shape[0])):
             if rows.shape[0]:
                 pairs = wp.array(rows, dtype=wp.vec4i, device=self.device)
-                wp.launch(kernel, dim=rows.shape[0], inputs=[pairs, positions, first],
+                wp.launch(_pair_contacts, dim=rows.shape[0], inputs=[pairs, positions, first, kind],
                           outputs=[springs.vertices, springs.weights, springs.normals], device=self.device)
         springs.set_count(total)
         return springs
