@@ -7,7 +7,7 @@ Public API (one import path per name):
 - :func:`vertex_face_distance`, :func:`edge_edge_distance`: batched float32 distances.
 - :func:`vertex_face_ccd`, :func:`edge_edge_ccd`: batched conservative float32 CCD.
 - :func:`load_mesh`, :func:`validate_mesh`, :class:`MeshData`, :class:`MeshTopology`: mesh input.
-- :class:`PsccError`, :class:`InputError`, :class:`CapacityError`: errors.
+- :class:`PsccError`, :class:`InputError`, :class:`OutputError`, :class:`CapacityError`: errors.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pscc.collision.detector import CollisionDetector as CollisionDetector
 from pscc.collision.detector import CollisionResult as CollisionResult
 from pscc.errors import CapacityError as CapacityError
 from pscc.errors import InputError as InputError
+from pscc.errors import OutputError as OutputError
 from pscc.errors import PsccError as PsccError
 from pscc.geometry.ccd import edge_edge_ccd as edge_edge_ccd
 from pscc.geometry.ccd import vertex_face_ccd as vertex_face_ccd
@@ -37,6 +38,7 @@ __all__ = [
     "InputError",
     "MeshData",
     "MeshTopology",
+    "OutputError",
     "PsccError",
     "edge_edge_ccd",
     "edge_edge_distance",

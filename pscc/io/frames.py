@@ -1,4 +1,4 @@
-"""NPZ frames and JSON stats, written atomically (a temporary file in the same folder, then a rename).
+"""NPZ frames and JSON stats, written atomically (:mod:`pscc._atomic`: a temporary sibling, then a rename).
 
 Frame contract of ``pscc simulate`` (kept by later formats): ``DIR/frames/frame_00000.npz``, ...
 with the keys of :data:`FRAME_KEYS`:
@@ -18,43 +18,17 @@ Obstacle arrays are empty (shape (0, 3)) when the scene has none.
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
 
 import numpy as np
 
+from pscc._atomic import write_atomic, write_json_atomic
+from pscc.errors import InputError
+
+__all__ = ["FRAME_KEYS", "frame_path", "read_frame", "write_frame", "write_json_atomic"]
+
 FRAME_KEYS: tuple[str, ...] = ("vertices", "faces", "object_ids", "obstacle_vertices", "obstacle_faces")
 """Keys of every frame file, in this order."""
-
-
-def _write_atomic(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` through a temporary sibling and ``os.replace``: readers never see half a file."""
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        # mkstemp creates 0600 files; give the finished file the permissions of an ordinary one.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as indented JSON, atomically."""
-    text = json.dumps(data, indent=1, sort_keys=False).encode()
-    _write_atomic(Path(path), lambda stream: stream.write(text))
 
 
 def frame_path(out_dir: Path, index: int) -> Path:
@@ -81,13 +55,23 @@ def write_frame(out_dir: Path, index: int, vertices: np.ndarray, faces: np.ndarr
         "obstacle_faces": np.zeros((0, 3), np.int32) if obstacle_faces is None
         else np.ascontiguousarray(obstacle_faces, dtype=np.int32),
     }
-    path = frame_path(out_dir, index)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(path, lambda stream: np.savez(stream, **arrays))
-    return path
+    return write_atomic(frame_path(out_dir, index), lambda stream: np.savez(stream, **arrays))
 
 
 def read_frame(path: Path) -> dict[str, np.ndarray]:
-    """Read a frame file into a dict of arrays (the keys of :data:`FRAME_KEYS`)."""
-    with np.load(path) as data:
-        return {key: data[key] for key in FRAME_KEYS}
+    """Read a frame file into a dict of arrays (the keys of :data:`FRAME_KEYS`).
+
+    Raises:
+        InputError: the file is missing, damaged or lacks a key.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [key for key in FRAME_KEYS if key not in data.files]
+            if missing:
+                raise InputError(str(path), missing[0], "is missing", "pass a frame file written by pscc simulate")
+            return {key: data[key] for key in FRAME_KEYS}
+    except InputError:
+        raise
+    except Exception as error:  # zipfile.BadZipFile, EOFError, OSError, ValueError, zlib.error: damaged file
+        raise InputError(str(path), "file", f"is not a readable frame file ({type(error).__name__}: {error})",
+                         "write the frame again (pscc simulate --overwrite)") from None

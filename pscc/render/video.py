@@ -1,20 +1,20 @@
 """PNG and MP4 output of rendered frames (imageio v3; ffmpeg from the ``imageio-ffmpeg`` wheel), and
 :func:`render_run`, which turns a ``pscc simulate`` run folder into ``preview.png`` and ``animation.mp4``.
 
-Every file is written atomically: to a temporary file in the destination folder, then renamed
-with ``os.replace``, so a reader never sees half a file and a failed write leaves nothing behind.
+Every file is written atomically (:mod:`pscc._atomic`): to a temporary file in the destination folder,
+then renamed with ``os.replace``, so a reader never sees half a file and a failed write leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from pscc._atomic import atomic_output
 from pscc.errors import InputError
 from pscc.io.frames import read_frame
 from pscc.render.raycast import Camera, Renderer, fit_camera, scene_bounds
@@ -34,18 +34,9 @@ def _check_image(image: np.ndarray, name: str = "image") -> np.ndarray:
 
 def _write_atomic(path: Path, write: Callable[[str], None]) -> Path:
     """Call ``write(temporary_path)`` for a sibling of ``path`` with the same suffix, then rename it to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(handle)
-    try:
-        write(temporary)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
-    return path
+    with atomic_output(path) as temporary:
+        write(str(temporary))
+    return Path(path)
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> Path:
