@@ -100,3 +100,37 @@ DEGENERATE_FACE_RATIO: float = 1.0e-10
 """A face with |n|^2 <= ratio |e1|^2 |e2|^2 (sine of its corner angle below 1e-5) is degenerate: its
 normal is noise, so its normal-cone mask is empty and no node containing it is certified.
 Dimensionless."""
+
+MAX_COORDINATE: float = 1.0e9
+"""Largest |coordinate| the collision detector accepts, in length units (the units of the positions).
+
+Rationale: the kernels form products of up to four lengths in float32 (|n|^2 = |e1 x e2|^2 and
+|e1|^2 |e2|^2 in the supporting-plane and normal-cone tests, the thickness squared in every distance
+comparison, products of three coordinate differences in the CCD cubics). With |x| <= 1e9 every
+difference is <= 2e9 and (2e9)^4 = 1.6e37 stays 20x below the float32 maximum 3.4e38. Measured on a
+folded sheet scaled by 10^k (``docs/mesh-input.md``): the pair sets match unit scale up to |x| ~ 1e13;
+beyond, the ``pscc`` certificate is refused (more pairs, still conservative), and from a thickness of
+about sqrt(3.4e38) ~ 1.8e19 (|x| ~ 3e20) the thickness squared overflows and DCD misses every pair.
+1e9 leaves four decades below the first change and ten below the first miss, and still admits
+millimetre coordinates of a 1000 km scene.
+"""
+
+MIN_COORDINATE_SCALE: float = 1.0e-6
+"""Smallest largest-|coordinate| of a position array the collision detector accepts (length units);
+an array whose coordinates are all exactly 0 is accepted too.
+
+Rationale: the same products of four lengths underflow below the smallest normal float32 (1.2e-38)
+once the lengths fall below ~1.9e-10 and flush to 0 below ~6e-12; the supporting-plane test then
+reads a zero normal and drops pairs within the thickness. Measured on the folded sheet (edges ~ 1/11
+of |x|): the spatial-hash and ``pscc`` methods miss pairs from |x| ~ 2e-11 down, CCD from ~1e-14.
+With |x| >= 1e-6, a mesh whose edges are at least 1e-3 of its size keeps them >= 1e-9 (fourth
+power 1e-36, normal), 5 decades above the first miss. Express smaller scenes in a smaller unit.
+"""
+
+MAX_THICKNESS: float = MAX_COORDINATE
+"""Largest thickness (proximity distance) the collision detector accepts, in length units.
+
+Rationale: every DCD comparison squares the thickness; at 1e9 that is 1e18, far below the float32
+maximum, whereas a thickness above ~1.8e19 overflows to Inf and DCD silently misses every pair. A
+thickness larger than the coordinate range would not be meaningful anyway.
+"""

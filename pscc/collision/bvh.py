@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from pscc._checks import as_numpy
+from pscc._checks import INT32_MAX, as_numpy, check_object_ids
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import MeshData
 from pscc.mesh.topology import MeshTopology
@@ -256,7 +256,8 @@ class MaterialBvh:
     level_offsets         (D + 1,)    nodes of depth d: ``level_nodes[level_offsets[d]:level_offsets[d+1]]``
     level_nodes           (N,)        node ids by depth, deepest last (the identity, ids are BFS)
     roots                 (R,)        root node of each object present, by ascending object id
-    object_root           (O,)        root of object id o, -1 for unused ids (O = max object id + 1)
+    object_values         (R,)        the distinct object ids, ascending; ``roots[k]`` is the root of id
+                                      ``object_values[k]``
     ====================  ==========  ===============================================================
 
     Contour: every mesh edge with exactly one incident face inside the node (edges shared with a
@@ -268,8 +269,11 @@ class MaterialBvh:
     loop of an internal node starts at its smallest vertex id. Non-testable nodes have an empty
     contour range.
 
+    Object ids need not be contiguous (any id in [0, 2**31 - 1]): every per-object table has R rows,
+    one per distinct id, never ``max id + 1``; :meth:`root_of` looks an id up.
+
     Device copies of these arrays (flags as int32 0/1; not ``panel``, ``face_panel``, ``roots``,
-    ``object_root``) are the fields of :attr:`arrays`, a :class:`MaterialBvhArrays` on
+    ``object_values``) are the fields of :attr:`arrays`, a :class:`MaterialBvhArrays` on
     :attr:`device`. The host arrays are owned by the instance; do not modify them.
     """
 
@@ -296,7 +300,7 @@ class MaterialBvh:
         self.level_offsets: np.ndarray = host["level_offsets"]
         self.level_nodes: np.ndarray = host["level_nodes"]
         self.roots: np.ndarray = host["roots"]
-        self.object_root: np.ndarray = host["object_root"]
+        self.object_values: np.ndarray = host["object_values"]
         self.arrays = MaterialBvhArrays()
         for name in _DEVICE_FIELDS:
             values = np.ascontiguousarray(host[name], dtype=np.int32)
@@ -333,6 +337,16 @@ class MaterialBvh:
         """Loop vertices of ``node`` (empty when it is not testable); a view into ``contour_vertices``."""
         return self.contour_vertices[self.contour_offsets[node]:self.contour_offsets[node + 1]]
 
+    def root_of(self, object_id: int) -> int:
+        """Root node of object ``object_id``, or -1 when no face has that id.
+
+        Allocates: no. Capture-safe: no (host lookup).
+        """
+        k = int(np.searchsorted(self.object_values, object_id))
+        if k < self.object_values.shape[0] and int(self.object_values[k]) == int(object_id):
+            return int(self.roots[k])
+        return -1
+
     def faces_of(self, node: int) -> np.ndarray:
         """Faces covered by ``node``; a view into ``face_order``."""
         return self.face_order[self.face_begin[node]:self.face_end[node]]
@@ -367,7 +381,8 @@ class MaterialBvh:
             faces: (face_count, 3) integer vertex ids (int32), at least one face.
             material: (vertex_count, 2) or (vertex_count, 3) float material coordinates: the rest
                 / UV coordinates, or the first positions when the mesh has none.
-            object_ids: (face_count,) integer object id >= 0 of each face.
+            object_ids: (face_count,) integer object id of each face, in [0, 2**31 - 1]; ids need
+                not be contiguous (memory grows with the number of distinct ids, not the largest).
             topology: ``MeshTopology.from_faces(faces, vertex_count)``.
             device: Warp device of the uploaded arrays.
             rigid_objects: Object ids whose faces form one unsplit node each.
@@ -409,10 +424,7 @@ def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology
     if tris.min() < 0 or tris.max() >= n:
         raise InputError("argument", "faces", f"a vertex id is outside [0, {n})",
                          "pass faces indexing the rows of material")
-    objects = as_numpy(object_ids)
-    if objects.shape != (tris.shape[0],) or objects.dtype.kind not in "iu" or (objects.size and objects.min() < 0):
-        raise InputError("argument", "object_ids", f"shape {objects.shape} dtype {objects.dtype} is not "
-                         f"({tris.shape[0]},) non-negative integers", "pass one object id >= 0 per face")
+    objects = check_object_ids(object_ids, tris.shape[0])
     if topology.face_edges.shape != tris.shape or topology.vertex_count != n:
         raise InputError("argument", "topology", f"built for {topology.face_edges.shape[0]} faces and "
                          f"{topology.vertex_count} vertices, not {tris.shape[0]} and {n}",
@@ -422,6 +434,8 @@ def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology
     except (TypeError, ValueError) as exc:
         raise InputError("argument", "rigid_objects", "is not a set of integer object ids",
                          "pass e.g. {1, 3}") from exc
+    # Ids no face can have select nothing; dropping them keeps the set within int64 for np.isin.
+    rigid = frozenset(o for o in rigid if 0 <= o <= INT32_MAX)
     return tris, coords, objects.astype(np.int64), rigid
 
 
@@ -511,8 +525,9 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
     positions, which = _range_positions(begin[is_leaf], end[is_leaf])
     face_leaf[face_order[positions]] = ids[is_leaf][which]
     plo_all, phi_all = gather("plo"), gather("phi")
-    object_root = np.full(int(object_values.max()) + 1, -1, dtype=np.int64)
-    object_root[levels[0]["object"]] = levels[0]["id"]
+    # One root per distinct object id, by ascending id (a table of max id + 1 rows would take 16 GiB
+    # for an id of 2**31 - 1; ids need not be contiguous).
+    root_order = np.argsort(levels[0]["object"], kind="stable")
     level_offsets = np.cumsum([0] + [level["id"].shape[0] for level in levels])
     return {
         "left": left, "right": right, "parent": parent,
@@ -521,7 +536,7 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
         "object_id": gather("object"), "panel": np.where(phi_all - plo_all == 1, plo_all, -1),
         "face_order": face_order, "face_leaf": face_leaf, "face_panel": face_panel,
         "level_offsets": level_offsets, "level_nodes": ids,
-        "roots": object_root[object_root >= 0], "object_root": object_root,
+        "roots": levels[0]["id"][root_order], "object_values": levels[0]["object"][root_order],
     }
 
 

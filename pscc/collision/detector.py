@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from pscc._checks import as_numpy, check_nonnegative, check_points
+from pscc._checks import INT32_MAX, as_numpy, check_coordinate_range, check_object_ids, check_points, check_thickness
+from pscc._memory import DETECTION_BYTES_PER_TRIANGLE, check_fits
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.brute_force import BroadPhaseBruteForce
 from pscc.collision.bvh import MaterialBvh
@@ -80,7 +81,8 @@ class CollisionDetector:
     Args:
         faces: (face_count, 3) integer vertex ids.
         method: one of :data:`METHODS` (default ``"pscc"``).
-        object_ids: optional (face_count,) object id per face (default: one object).
+        object_ids: optional (face_count,) integer object id per face, in [0, 2**31 - 1] (default: one
+            object). Ids need not be contiguous; memory grows with the number of distinct ids.
         device: Warp device name (default: Warp's default device).
         rest: optional (vertex_count, 2 or 3) material-space coordinates for the ``pscc`` BVH;
             when omitted, the BVH is built over the first positions seen.
@@ -88,6 +90,16 @@ class CollisionDetector:
             faces are never tested against each other.
         shrink_interval: ``pscc`` shrinks its test front every this many calls.
         cell_size_factor: k of the grid-size heuristic, cell = k x mean box axis length.
+
+    Coordinate range: the kernels compute in float32, so every call that takes positions refuses
+    arrays whose largest |coordinate| exceeds :data:`pscc.tolerances.MAX_COORDINATE` (1e9 length
+    units: products of four lengths would overflow) or is positive but below
+    :data:`pscc.tolerances.MIN_COORDINATE_SCALE` (1e-6: they would underflow), and a thickness
+    above :data:`pscc.tolerances.MAX_THICKNESS` (1e9), with an :class:`InputError` naming the
+    argument, the largest value and the limit. Inside the range the pairs do not depend on the
+    unit (measured for every method, DCD and CCD, from 1e-6 to 1e9; ``docs/mesh-input.md``).
+    Positions are rounded to float32 on entry, so a small object far from the origin loses detail
+    (about |x| 2^-24): express positions relative to a nearby origin.
 
     Raises:
         InputError: bad faces, object ids, method or device.
@@ -115,14 +127,25 @@ class CollisionDetector:
         if faces_np.size and faces_np.dtype.kind not in "iu":
             raise InputError("argument", "faces", f"dtype {faces_np.dtype} is not an integer type",
                              "pass vertex ids as integers")
+        if faces_np.size and (int(faces_np.max()) > INT32_MAX or int(faces_np.min()) < 0):
+            bad = int(faces_np.max()) if int(faces_np.max()) > INT32_MAX else int(faces_np.min())
+            raise InputError("argument", "faces", f"vertex id {bad} is outside [0, {INT32_MAX}]",
+                             "pass 0-based vertex ids that fit a 32-bit signed integer")
         if int(shrink_interval) < 1:
             raise InputError("argument", "shrink_interval", f"{shrink_interval!r} is below 1", "pass an integer >= 1")
         self.method = method
         self.device = resolve_device(device)
+        check_fits(faces_np.shape[0] * DETECTION_BYTES_PER_TRIANGLE, what=f"detecting collisions among "
+                   f"{faces_np.shape[0]:,} triangles", source="argument", field="faces",
+                   fix="pass a coarser mesh or use a device with more memory", device=str(self.device))
         self._faces_np = np.ascontiguousarray(faces_np, dtype=np.int32)
-        self._object_ids_np = None if object_ids is None else as_numpy(object_ids)
+        self._object_ids_np = None if object_ids is None else check_object_ids(object_ids, faces_np.shape[0])
         self._rest = None if rest is None else as_numpy(rest)
-        self._rigid_objects = frozenset(int(o) for o in rigid_objects)
+        try:
+            self._rigid_objects = frozenset(int(o) for o in rigid_objects)
+        except (TypeError, ValueError) as exc:
+            raise InputError("argument", "rigid_objects", f"{rigid_objects!r} is not a collection of integer "
+                             "object ids", "pass e.g. {1, 3}, or () for none") from exc
         self._shrink_interval = int(shrink_interval)
         self._cell_size_factor = float(cell_size_factor)
         self._vertex_count: int | None = None
@@ -136,6 +159,13 @@ class CollisionDetector:
 
     def _setup(self, vertex_count: int, positions: np.ndarray) -> None:
         """Validate the topology against the first positions and allocate device buffers."""
+        needed = int(self._faces_np.max()) + 1 if self._faces_np.size else 0
+        if vertex_count < needed:
+            # validate_mesh would blame the faces; the positions are what is short.
+            raise InputError("argument", "positions",
+                             f"shape {positions.shape} has {vertex_count} rows, but the faces use vertex ids up to "
+                             f"{needed - 1}, so at least {needed} rows are needed, shape ({needed}, 3)",
+                             "pass one (x, y, z) row per mesh vertex, in the vertex order the faces index")
         mesh = validate_mesh(positions, self._faces_np, object_ids=self._object_ids_np, rest=self._rest)
         self._vertex_count = vertex_count
         self.object_ids = mesh.object_ids
@@ -170,6 +200,7 @@ class CollisionDetector:
 
     def _positions(self, value: Any, name: str) -> np.ndarray:
         points = check_points(value, name, shape_tail=(3,))
+        check_coordinate_range(points, name)
         if self._vertex_count is not None and points.shape[0] != self._vertex_count:
             raise InputError("argument", name,
                              f"{points.shape[0]} vertices, but this detector was set up for "
@@ -182,7 +213,7 @@ class CollisionDetector:
         if x1 is not None and x1.shape != x0.shape:
             raise InputError("argument", "positions_end", f"shape {x1.shape} differs from positions {x0.shape}",
                              "pass end positions of the same vertices")
-        h = check_nonnegative(thickness, "thickness")
+        h = check_thickness(thickness, "thickness")
         if self.topology is None:
             self._setup(x0.shape[0], x0)
         return x0, x1, h
@@ -192,7 +223,7 @@ class CollisionDetector:
         first call (nothing is detected; the ``pscc`` front stays at its roots).
 
         Raises:
-            InputError: bad positions or faces.
+            InputError: bad positions (including coordinates outside the supported range) or faces.
         """
         self._inputs(positions, None, 0.0)
 
@@ -237,7 +268,8 @@ class CollisionDetector:
             ``front_size``, ``candidate_pairs`` and ``seconds``.
 
         Raises:
-            InputError: bad positions or thickness.
+            InputError: bad positions or thickness, including coordinates or a thickness outside
+                the supported range (see the class docstring).
         """
         x0, x1, h = self._inputs(positions, positions_end, thickness)
         return self._broad(x0, x1, h)
@@ -264,7 +296,9 @@ class CollisionDetector:
                     break
             seconds["broad_phase"] = time.perf_counter() - mark
             m = self._faces_np.shape[0]
-            sizes = np.bincount(self.object_ids)
+            # Faces per distinct object id (ids need not be contiguous: no table of max id + 1 rows).
+            _, sizes = np.unique(self.object_ids, return_counts=True)
+            sizes = sizes.astype(np.int64)
             self_pairs = int((sizes * (sizes - 1) // 2).sum())
             stats.update(bv_tests=self.brute_force.bounding_volume_tests(x0.shape[0], m, self.topology.edge_count),
                          triangle_pairs=m * (m - 1) // 2, self_triangle_pairs=self_pairs,
@@ -323,8 +357,9 @@ class CollisionDetector:
         everything is tested.
 
         Raises:
-            InputError: no broad phase has run, CCD after a discrete broad phase, or a thickness
-                larger than the broad phase's (its candidates would not cover the query).
+            InputError: no broad phase has run, CCD after a discrete broad phase, a thickness
+                larger than the broad phase's (its candidates would not cover the query), or
+                positions or a thickness outside the supported range (see the class docstring).
         """
         if self._broad_mode is None:
             raise InputError("argument", "narrow_phase", "no broad phase has run", "call broad_phase() first")
@@ -378,7 +413,8 @@ class CollisionDetector:
         Args:
             positions: (vertex_count, 3) positions at the start of the step.
             positions_end: optional (vertex_count, 3) positions at the end of the step (CCD).
-            thickness: proximity distance (>= 0), in the units of the positions.
+            thickness: proximity distance in [0, :data:`pscc.tolerances.MAX_THICKNESS`], in the units
+                of the positions.
 
         Returns:
             A :class:`CollisionResult`. ``stats`` holds, for every method: ``bv_tests``,
@@ -387,7 +423,8 @@ class CollisionDetector:
             and ``total``) and ``device_bytes`` (per structure and ``total``).
 
         Raises:
-            InputError: bad positions or thickness.
+            InputError: bad positions or thickness, including coordinates or a thickness outside
+                the supported range (see the class docstring).
         """
         started = time.perf_counter()
         x0, x1, h = self._inputs(positions, positions_end, thickness)

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from pscc._checks import check_points
+from pscc._checks import check_object_ids, check_points
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import CapacityError, InputError
 from pscc.geometry.segment_triangle import segment_triangle_classify
@@ -187,11 +187,7 @@ class IntersectionCheck:
         if object_ids is None:
             objects = np.zeros(m, dtype=np.int32)
         else:
-            objects = np.asarray(object_ids)
-            if objects.shape != (m,) or objects.dtype.kind not in "iu":
-                raise InputError("argument", "object_ids", f"shape {objects.shape} dtype {objects.dtype} is not "
-                                 f"({m},) integer", "pass one integer object id per face")
-            objects = objects.astype(np.int32)
+            objects = check_object_ids(object_ids, m)
         self.device = wp.get_device(device)
         self.vertex_count = int(vertex_count)
         self.face_count = m

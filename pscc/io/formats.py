@@ -24,9 +24,7 @@ Vertex coordinates round-trip exactly as float32 (OBJ writes ``%.9g``, the other
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from types import TracebackType
@@ -34,8 +32,10 @@ from typing import Any
 
 import numpy as np
 
+from pscc._atomic import atomic_output, write_atomic
+from pscc._checks import INT32_MAX, unused_object_ids
 from pscc.errors import InputError
-from pscc.io.frames import _write_atomic, frame_path, read_frame, write_frame
+from pscc.io.frames import frame_path, read_frame, write_frame
 
 __all__ = [
     "FORMATS",
@@ -178,8 +178,9 @@ def _frame(index: int, vertices: Any, faces: Any, object_ids: Any, obstacle_vert
 
 
 def _obstacle_object_id(object_ids: np.ndarray) -> int:
-    """Object id given to obstacle faces in PLY and USD: one past the largest cloth id."""
-    return int(object_ids.max()) + 1 if object_ids.size else 0
+    """Object id given to obstacle faces in PLY and USD: one past the largest cloth id (a free id when that
+    would not fit in int32)."""
+    return int(unused_object_ids(object_ids, 1)[0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -235,10 +236,13 @@ def write_obj_frame(out_dir: Path, index: int, vertices: np.ndarray, faces: np.n
     """
     arrays = _frame(index, vertices, faces, object_ids, obstacle_vertices, obstacle_faces)
     data = _obj_text(index, *arrays).encode("ascii")
-    path = obj_frame_path(out_dir, index)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(path, lambda stream: stream.write(data))
-    return path
+    return write_atomic(obj_frame_path(out_dir, index), lambda stream: stream.write(data))
+
+
+def _short(value: object, limit: int = 40) -> str:
+    """``str(value)`` cut to ``limit`` characters, so that a huge token keeps a message short."""
+    text = str(value)
+    return text if len(text) <= limit else f"{text[:limit - 3]}... ({len(text)} characters)"
 
 
 def read_obj_frame(path: Path) -> dict[str, np.ndarray]:
@@ -258,6 +262,7 @@ def read_obj_frame(path: Path) -> dict[str, np.ndarray]:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(source, "file", f"cannot be read ({exc})", "pass an OBJ frame written by pscc") from exc
     coords: list[list[str]] = [[], []]  # cloth, obstacles
+    vertex_lines: list[list[int]] = [[], []]
     face_rows: list[list[list[int]]] = [[], []]
     face_lines: list[list[int]] = [[], []]
     ids: list[int] = []
@@ -273,7 +278,11 @@ def read_obj_frame(path: Path) -> dict[str, np.ndarray]:
             if name == "obstacles":
                 section = 1
             elif match:
-                section, piece = 0, int(match.group(1) or 0)
+                digits = match.group(1) or "0"
+                if len(digits) > 10 or int(digits) > INT32_MAX:  # int32 on output; refuse before int() of a huge string
+                    raise InputError(source, f"line {lineno}", f"object id {_short(digits)} of {_short(name)!r} is "
+                                     f"larger than {INT32_MAX}", "use cloth_<id> with ids that fit a 32-bit integer")
+                section, piece = 0, int(digits)
             else:
                 raise InputError(source, f"line {lineno}", f"object {name!r} is neither cloth_<id> nor obstacles",
                                  "read OBJ files pscc did not write with pscc.mesh.load_mesh")
@@ -285,6 +294,7 @@ def read_obj_frame(path: Path) -> dict[str, np.ndarray]:
                 raise InputError(source, f"line {lineno}", "cloth vertex after obstacle vertices",
                                  "write all cloth vertices before the obstacles")
             coords[section].extend(tokens[1:4])
+            vertex_lines[section].append(lineno)
         elif tag == "f":
             if len(tokens) != 4:
                 raise InputError(source, f"line {lineno}", f"face has {len(tokens) - 1} vertices, not 3",
@@ -298,14 +308,25 @@ def read_obj_frame(path: Path) -> dict[str, np.ndarray]:
             if 0 in corners:
                 raise InputError(source, f"line {lineno}", "vertex id 0 (OBJ ids start at 1)",
                                  "write 1-based vertex ids")
+            if any(abs(c) > INT32_MAX for c in corners):  # would overflow the int64 face array
+                raise InputError(source, f"line {lineno}", f"face vertex id {_short(max(corners, key=abs))} is out "
+                                 f"of range (more than {INT32_MAX} in magnitude)", "write 1-based vertex ids "
+                                 "between 1 and the number of 'v' lines")
             face_rows[section].append([c - 1 if c > 0 else defined + c for c in corners])
             face_lines[section].append(lineno)
             if section == 0:
                 ids.append(piece)
     try:
-        vertices, obstacle_vertices = (np.array(c, dtype=np.float64).astype(np.float32).reshape(-1, 3) for c in coords)
+        with np.errstate(over="ignore"):  # beyond float32 becomes Inf, refused below
+            vertices, obstacle_vertices = (np.array(c, dtype=np.float64).astype(np.float32).reshape(-1, 3)
+                                           for c in coords)
     except ValueError as exc:
         raise InputError(source, "v", "a vertex coordinate is not a number", "write 'v x y z' with numbers") from exc
+    for points, lines in ((vertices, vertex_lines[0]), (obstacle_vertices, vertex_lines[1])):
+        bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+        if bad.size:
+            raise InputError(source, f"line {lines[int(bad[0])]}", "vertex holds NaN or Inf (after conversion to "
+                             "float32)", "write finite coordinates within the float32 range")
     n, k = vertices.shape[0], obstacle_vertices.shape[0]
     faces = np.array(face_rows[0], dtype=np.int64).reshape(-1, 3)
     obstacle_faces = np.array(face_rows[1], dtype=np.int64).reshape(-1, 3) - n
@@ -374,18 +395,19 @@ def write_ply_frame(out_dir: Path, index: int, vertices: np.ndarray, faces: np.n
     """
     arrays = _frame(index, vertices, faces, object_ids, obstacle_vertices, obstacle_faces)
     data = _ply_bytes(index, *arrays)
-    path = ply_frame_path(out_dir, index)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(path, lambda stream: stream.write(data))
-    return path
+    return write_atomic(ply_frame_path(out_dir, index), lambda stream: stream.write(data))
 
 
 def _ply_header(source: str, data: bytes) -> tuple[list[tuple[str, int, list[list[str]]]], dict[str, int], int]:
-    """Elements (name, count, property lines), pscc comment values and the offset of the body."""
+    """Elements (name, count, property lines), pscc comment values and the offset of the body.
+
+    Counts must be plain non-negative integers (the caller checks them against the file size).
+    """
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
         raise InputError(source, "header", "not a PLY file (no 'ply' ... 'end_header')", "pass a PLY frame")
-    body = data.index(b"\n", end) + 1
+    newline = data.find(b"\n", end)
+    body = len(data) if newline < 0 else newline + 1
     elements: list[tuple[str, int, list[list[str]]]] = []
     comments: dict[str, int] = {}
     for line in data[:end].decode("ascii", errors="replace").splitlines()[1:]:
@@ -393,11 +415,18 @@ def _ply_header(source: str, data: bytes) -> tuple[list[tuple[str, int, list[lis
         if not tokens:
             continue
         if tokens[0] == "format" and tokens[1:2] != ["binary_little_endian"]:
-            raise InputError(source, "format", f"{' '.join(tokens[1:])} is not supported here",
+            raise InputError(source, "format", f"{_short(' '.join(tokens[1:]))} is not supported here",
                              "read other PLY files with pscc.mesh.load_mesh")
         if tokens[0] == "comment" and tokens[1:2] == ["pscc"] and "cloth_vertices" in tokens:
-            comments = {key: int(value) for key, value in zip(tokens[2::2], tokens[3::2], strict=False)}
+            values = tokens[3::2]
+            if not all(re.fullmatch(r"[0-9]{1,18}", value) for value in values):
+                raise InputError(source, "comment", f"pscc comment {_short(line.strip(), 60)!r} holds a value that is "
+                                 "not a count >= 0", "write the frame again")
+            comments = {key: int(value) for key, value in zip(tokens[2::2], values, strict=False)}
         elif tokens[0] == "element":
+            if len(tokens) != 3 or not re.fullmatch(r"[0-9]+", tokens[2]):
+                raise InputError(source, "header", f"{_short(line.strip(), 60)!r} does not give an element name and "
+                                 "a count >= 0", "write the frame again")
             elements.append((tokens[1], int(tokens[2]), []))
         elif tokens[0] == "property" and elements:
             elements[-1][2].append(tokens[1:])
@@ -434,14 +463,25 @@ def read_ply_frame(path: Path) -> dict[str, np.ndarray]:
                 raise InputError(source, name, f"property {' '.join(prop)!r} is not supported",
                                  "read this file with pscc.mesh.load_mesh") from exc
         dtype = np.dtype(fields)
-        if offset + count * dtype.itemsize > len(data):
-            raise InputError(source, name, f"file ends inside element {name!r} (truncated)", "write the frame again")
+        if dtype.itemsize == 0:  # no properties: the rows take no bytes, and hold nothing to read
+            if count and name in ("vertex", "face"):
+                raise InputError(source, name, f"element {name!r} has no properties",
+                                 "pass a PLY frame written by pscc")
+            continue
+        if offset + count * dtype.itemsize > len(data):  # Python ints: an absurd count cannot overflow
+            raise InputError(source, name, f"header declares {count} {name} rows but the file ends inside them "
+                             f"(truncated, or the count is corrupt)", "write the frame again")
         arrays[name] = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
         offset += count * dtype.itemsize
     vertex, face = arrays.get("vertex"), arrays.get("face")
     if vertex is None or any(c not in (vertex.dtype.names or ()) for c in "xyz"):
         raise InputError(source, "vertex", "no vertex element with x, y, z", "pass a PLY frame written by pscc")
-    points = np.column_stack([vertex[c] for c in "xyz"]).astype(np.float32).reshape(-1, 3)
+    with np.errstate(over="ignore"):  # doubles beyond float32 become Inf, refused below
+        points = np.column_stack([vertex[c] for c in "xyz"]).astype(np.float32).reshape(-1, 3)
+    bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    if bad.size:
+        raise InputError(source, f"vertex {int(bad[0])}", "holds NaN or Inf (after conversion to float32)",
+                         "write finite coordinates within the float32 range")
     if face is None or face.size == 0:
         rows, ids = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
     else:
@@ -457,6 +497,17 @@ def read_ply_frame(path: Path) -> dict[str, np.ndarray]:
     m = comments.get("cloth_faces", rows.shape[0])
     if not (0 <= n <= points.shape[0] and 0 <= m <= rows.shape[0]):
         raise InputError(source, "comment", "pscc counts exceed the element sizes", "write the frame again")
+    # Indices and ids are int32 in the frame contract: refuse what would wrap, and faces that leave their part.
+    for what, part, low, high in (("cloth", rows[:m], 0, n), ("obstacle", rows[m:], n, points.shape[0])):
+        bad = np.flatnonzero(np.any((part < low) | (part >= high), axis=1))
+        if bad.size:
+            row = int(bad[0]) + (0 if what == "cloth" else m)
+            raise InputError(source, f"face {row}", f"{what} face {rows[row].tolist()} refers to a vertex outside "
+                             f"the {what} vertices [{low}, {high})", "write the frame again")
+    bad = np.flatnonzero((ids[:m] < 0) | (ids[:m] > INT32_MAX))
+    if bad.size:
+        raise InputError(source, f"face {int(bad[0])}", f"object id {int(ids[int(bad[0])])} is outside "
+                         f"[0, {INT32_MAX}]", "write the frame again with non-negative 32-bit object ids")
     return {
         "vertices": np.ascontiguousarray(points[:n]),
         "faces": rows[:m].astype(np.int32),
@@ -472,29 +523,14 @@ def read_ply_frame(path: Path) -> dict[str, np.ndarray]:
 
 
 def _export_layer_atomic(layer: Any, path: Path) -> None:
-    """Export a USD layer to ``path`` through a temporary sibling and ``os.replace``.
+    """Export a USD layer to ``path`` atomically (:func:`pscc._atomic.atomic_output`).
 
-    USD writes layers by file name (not into a Python stream), so ``pscc.io.frames._write_atomic``
-    cannot be used; this keeps its contract: readers see the old or the new file, and nothing is
-    left behind on failure. The temporary name keeps the extension, which selects the file format.
+    USD writes layers by file name (not into a Python stream); the temporary name keeps the
+    extension, which selects the file format.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
-    os.close(handle)
-    try:
-        if not layer.Export(temporary):
+    with atomic_output(path) as temporary:
+        if not layer.Export(str(temporary)):
             raise OSError(f"USD could not write {temporary}")
-        handle = os.open(temporary, os.O_RDONLY)
-        try:
-            os.fsync(handle)
-        finally:
-            os.close(handle)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
 
 
 def _open_usd(path: Path, detach: bool = False) -> Any:

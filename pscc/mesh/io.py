@@ -10,17 +10,16 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
-import warnings
 import zipfile
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pscc._checks import check_points
+from pscc._atomic import write_atomic
+from pscc._checks import INT32_MAX, check_coordinate_range, check_points, read_input_bytes, shorten
 from pscc.errors import InputError
+from pscc.mesh._ply import load_ply
 from pscc.mesh.mesh_data import MeshData, _validate_mesh
 
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz")
@@ -28,7 +27,6 @@ SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz")
 
 _NPZ_REQUIRED = ("vertices", "faces")
 _NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids")
-_PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")
 
 
 # --------------------------------------------------------------------------------------------
@@ -61,7 +59,7 @@ def load_mesh(path: str | os.PathLike[str]) -> MeshData:
     if extension == ".obj":
         return _load_obj(file_path)
     if extension == ".ply":
-        return _load_ply(file_path)
+        return load_ply(file_path)
     return _load_npz(file_path)
 
 
@@ -94,6 +92,7 @@ def load_positions(path: str | os.PathLike[str], vertex_count: int) -> np.ndarra
             raw = _npz_array(archive, "vertices", source, required=True)
         positions = check_points(raw, "vertices", shape_tail=(3,), source=source)
         positions = np.array(positions, dtype=np.float32, order="C", copy=True)
+        check_coordinate_range(positions, "vertices", source=source)
     else:
         positions = load_mesh(file_path).vertices
     if positions.shape[0] != int(vertex_count):
@@ -115,7 +114,7 @@ def save_mesh_npz(path: str | os.PathLike[str], mesh: MeshData) -> None:
 
     Raises:
         InputError: the destination directory does not exist.
-        OSError: the file system refused the write.
+        OutputError: the file system refused the write (full disk, no permission).
     """
     target = Path(path)
     directory = target.parent
@@ -131,21 +130,7 @@ def save_mesh_npz(path: str | os.PathLike[str], mesh: MeshData) -> None:
         arrays["vertices_end"] = mesh.vertices_end
     if mesh.rest is not None:
         arrays["rest"] = mesh.rest
-    mode = target.stat().st_mode & 0o777 if target.exists() else 0o644
-    fd, temp_name = tempfile.mkstemp(dir=directory, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(temp_name, mode)
-        os.replace(temp_name, target)
-    except BaseException:
-        try:
-            os.unlink(temp_name)
-        except FileNotFoundError:
-            pass
-        raise
+    write_atomic(target, lambda stream: np.savez(stream, **arrays))
 
 
 # --------------------------------------------------------------------------------------------
@@ -175,17 +160,11 @@ def _check_path(path: str | os.PathLike[str]) -> tuple[Path, str]:
     return file_path, extension
 
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise InputError(str(path), "file", f"cannot be read ({exc.strerror or exc})",
-                         "check the file permissions and that the file is not locked") from exc
-
 
 # --------------------------------------------------------------------------------------------
 # OBJ
 # --------------------------------------------------------------------------------------------
+
 
 
 def _obj_error(source: str, lineno: int, problem: str, fix: str) -> InputError:
@@ -195,7 +174,7 @@ def _obj_error(source: str, lineno: int, problem: str, fix: str) -> InputError:
 def _load_obj(path: Path) -> MeshData:
     """Order-preserving OBJ parser that reports errors by line number."""
     source = str(path)
-    data = _read_bytes(path)
+    data = read_input_bytes(path)
     if b"\x00" in data:
         raise InputError(source, "file", "contains NUL bytes; it is not a text OBJ file",
                          "export the mesh as a text Wavefront OBJ file")
@@ -248,6 +227,12 @@ def _load_obj(path: Path) -> MeshData:
                     raise _obj_error(source, lineno, f"malformed vertex index {corner!r} in face",
                                      "write faces as 'f i j k' (or i/j, i//k, i/j/k) with integer "
                                      "indices") from exc
+                if abs(index) > INT32_MAX:
+                    # pscc stores vertex ids as int32; a longer id cannot name a vertex (and would
+                    # overflow the int64 face array).
+                    raise _obj_error(source, lineno, f"vertex index {shorten(head)} in face is out of range "
+                                     f"(more than {INT32_MAX} in magnitude; the file defines {vertex_count} "
+                                     "vertices so far)", "use vertex indices between 1 and the number of 'v' lines")
                 if index > 0:
                     index -= 1
                 elif index < 0:
@@ -288,140 +273,6 @@ def _load_obj(path: Path) -> MeshData:
 
     return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
                           object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label)
-
-
-# --------------------------------------------------------------------------------------------
-# PLY
-# --------------------------------------------------------------------------------------------
-
-
-def _ply_property(data: Any, name: str) -> np.ndarray:
-    """Column ``name`` of a trimesh raw PLY element (a dict for ASCII, a record array for binary)."""
-    return np.asarray(data[name])
-
-
-def _ply_vertices(source: str, elements: Mapping[str, Any]) -> np.ndarray:
-    element = elements.get("vertex")
-    if element is None or not element.get("length"):
-        return np.zeros((0, 3), dtype=np.float32)
-    data = element.get("data")
-    missing = [c for c in "xyz" if c not in element.get("properties", {})]
-    if missing:
-        raise InputError(source, "vertex", f"vertex element has no property {missing[0]!r}",
-                         "write vertex positions as float properties x, y and z")
-    if data is None:
-        raise InputError(source, "vertex", "vertex data could not be read (file corrupt)",
-                         "re-export the PLY file")
-    try:
-        columns = [_ply_property(data, c).astype(np.float64).reshape(-1) for c in "xyz"]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(source, "vertex", "vertex data is malformed or truncated",
-                         "re-export the PLY file") from exc
-    length = int(element["length"])
-    if any(c.shape[0] != length for c in columns):
-        raise InputError(source, "vertex", f"header declares {length} vertices but the data holds "
-                         "a different number (file truncated or corrupt)", "re-export the PLY file")
-    return np.column_stack(columns)
-
-
-def _ply_faces(source: str, elements: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray | None]:
-    """Raw face index rows and optional object ids, rejecting any non-triangle face."""
-    element = elements.get("face")
-    if element is None or not element.get("length"):
-        return np.zeros((0, 3), dtype=np.int64), None
-    length = int(element["length"])
-    properties: Mapping[str, str] = element.get("properties", {})
-    data = element.get("data")
-    name = next((n for n in _PLY_INDEX_NAMES if n in properties), None)
-    if name is None:
-        raise InputError(source, "face", "face element has no 'vertex_indices' list property",
-                         "write faces as 'property list uchar int vertex_indices'")
-    if data is None:
-        raise InputError(source, "face", "face data could not be read (file corrupt)",
-                         "re-export the PLY file")
-    not_triangles = "faces must be triangles"
-    fix_triangulate = "triangulate the mesh before exporting it"
-
-    if isinstance(data, np.ndarray) and data.dtype.names is not None:
-        # Binary PLY: a record array; the list is a record of (count 'f0', indices 'f1').
-        record = data[name]
-        if record.dtype.names is None or "f0" not in record.dtype.names:
-            raise InputError(source, "face", "vertex_indices is not a list property",
-                             "write faces as 'property list uchar int vertex_indices'")
-        counts = np.asarray(record["f0"]).reshape(-1)
-        bad = np.flatnonzero(counts != 3)
-        if bad.size:
-            row = int(bad[0])
-            raise InputError(source, f"face {row}", f"face has {int(counts[row])} vertices; "
-                             f"{not_triangles}", fix_triangulate)
-        indices = np.asarray(record["f1"])
-    else:
-        # ASCII PLY: a dict of columns; equal-length lists give a 2-D array, mixed ones an
-        # object array of per-face arrays.
-        try:
-            indices = _ply_property(data, name)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(source, "face", "face data is malformed or truncated",
-                             "re-export the PLY file") from exc
-        if indices.dtype == object:
-            lengths = np.fromiter((np.size(row) for row in indices.reshape(-1)), dtype=np.int64,
-                                  count=indices.size)
-            bad = np.flatnonzero(lengths != 3)
-            if bad.size:
-                row = int(bad[0])
-                raise InputError(source, f"face {row}", f"face has {int(lengths[row])} vertices; "
-                                 f"{not_triangles}", fix_triangulate)
-            try:
-                indices = np.stack([np.asarray(row).reshape(3) for row in indices.reshape(-1)])
-            except (TypeError, ValueError) as exc:
-                raise InputError(source, "face", "face data is malformed", "re-export the PLY file") \
-                    from exc
-        elif indices.ndim == 1 and length == 1:
-            indices = indices.reshape(1, -1)  # trimesh squeezes a single face to 1-D
-    if indices.ndim != 2 or indices.shape[0] != length:
-        raise InputError(source, "face", f"header declares {length} faces but the data holds "
-                         "a different number (file truncated or corrupt)", "re-export the PLY file")
-    if indices.shape[1] != 3:
-        raise InputError(source, "face 0", f"faces have {indices.shape[1]} vertices; {not_triangles}",
-                         fix_triangulate)
-
-    object_ids = None
-    if "object_id" in properties:
-        try:
-            object_ids = _ply_property(data, "object_id").reshape(-1)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(source, "object_id", "face property object_id is malformed",
-                             "write object_id as one integer scalar per face") from exc
-        if object_ids.dtype == object or object_ids.shape[0] != length:
-            raise InputError(source, "object_id", "face property object_id is not one integer per "
-                             "face", "write object_id as 'property int object_id' on the face element")
-    return indices, object_ids
-
-
-def _load_ply(path: Path) -> MeshData:
-    """Load a PLY through trimesh's raw element data (no triangulation, merging or reordering)."""
-    from trimesh.exchange.ply import load_ply
-
-    source = str(path)
-    try:
-        with open(path, "rb") as handle, warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            loaded = load_ply(handle, fix_texture=False, prefer_color=None, skip_materials=True)
-    except OSError as exc:
-        raise InputError(source, "file", f"cannot be read ({exc.strerror or exc})",
-                         "check the file permissions") from exc
-    except Exception as exc:  # trimesh raises assorted errors on corrupt files
-        raise InputError(source, "file", f"is not a readable PLY file ({exc})",
-                         "re-export the mesh as a PLY file with triangle faces; mixed triangle and "
-                         "quad faces in binary PLY also end up here: triangulate the mesh") from exc
-    elements = loaded.get("metadata", {}).get("_ply_raw")
-    if elements is None:
-        raise InputError(source, "file", "trimesh returned no raw PLY elements",
-                         "install a trimesh version >= 4.0")
-    vertices = _ply_vertices(source, elements)
-    faces, object_ids = _ply_faces(source, elements)
-    return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
-                          object_ids=object_ids, face_label=None)
 
 
 # --------------------------------------------------------------------------------------------

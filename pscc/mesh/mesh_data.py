@@ -13,10 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from pscc._checks import as_numpy, check_points
+from pscc._checks import as_numpy, check_coordinate_range, check_object_ids, check_points
 from pscc.errors import InputError
-
-_INT32_MAX = int(np.iinfo(np.int32).max)
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,12 +23,15 @@ class MeshData:
 
     Invariants (established by :func:`validate_mesh`):
 
-    * ``vertices`` is a C-contiguous (n, 3) float32 array of finite numbers, n >= 1.
+    * ``vertices`` is a C-contiguous (n, 3) float32 array of finite numbers, n >= 1, whose largest
+      |coordinate| is 0 or in [``MIN_COORDINATE_SCALE``, ``MAX_COORDINATE``] (:mod:`pscc.tolerances`).
     * ``faces`` is a C-contiguous (m, 3) int32 array, m >= 1, every index in [0, n), the three ids
       of a face distinct and no two faces made of the same three vertex ids.
-    * ``vertices_end`` is None or a finite (n, 3) float32 array in the same vertex order.
+    * ``vertices_end`` is None or a finite (n, 3) float32 array in the same vertex order, in the same
+      coordinate range.
     * ``rest`` is None or a finite (n, 2) or (n, 3) float32 array of material coordinates.
-    * ``object_ids`` is an (m,) int32 array of ids >= 0 (all zero unless given).
+    * ``object_ids`` is an (m,) int32 array of ids in [0, 2**31 - 1] (all zero unless given); they
+      need not be contiguous.
 
     Vertices are never reordered or merged: row i of every per-vertex array is vertex i of the
     input. Zero-area faces and non-manifold edges are allowed.
@@ -65,7 +66,11 @@ class MeshData:
 
     @property
     def object_count(self) -> int:
-        """Number of object id slots, ``max(object_ids) + 1`` (ids need not all be used)."""
+        """``max(object_ids) + 1``: one past the largest id (ids need not all be used).
+
+        This is not the number of distinct objects (``np.unique(object_ids).size``); never size a
+        per-object table by it, since an id may be as large as 2**31 - 1.
+        """
         if self.object_ids.size == 0:
             return 0
         return int(self.object_ids.max()) + 1
@@ -117,6 +122,7 @@ def _validate_mesh(
         raise InputError(source, "vertices", "the mesh has no vertices (empty mesh)",
                          "pass a non-empty (n, 3) vertex array")
     verts = _check_point_array(vertex_array, "vertices", source, (3,))
+    check_coordinate_range(verts, "vertices", source=source)
     n = verts.shape[0]
 
     # --- faces ----------------------------------------------------------------------------
@@ -179,6 +185,7 @@ def _validate_mesh(
     end = None
     if vertices_end is not None:
         end = _check_point_array(vertices_end, "vertices_end", source, (3,))
+        check_coordinate_range(end, "vertices_end", source=source)
         if end.shape != verts.shape:
             raise InputError(source, "vertices_end",
                              f"shape {end.shape} does not match vertices shape {verts.shape}",
@@ -200,24 +207,7 @@ def _validate_mesh(
     if object_ids is None:
         ids = np.zeros(m, dtype=np.int32)
     else:
-        raw_ids = _to_array(object_ids, "object_ids", source, "(m,)")
-        if raw_ids.dtype.kind not in "iu":
-            raise InputError(source, "object_ids", f"dtype {raw_ids.dtype} is not an integer type",
-                             "pass integer object ids >= 0, one per face")
-        if raw_ids.shape != (m,):
-            raise InputError(source, "object_ids",
-                             f"shape {raw_ids.shape} does not match ({m},) (one id per face)",
-                             "pass a 1-D array with one object id per face")
-        bad = (raw_ids > _INT32_MAX) if raw_ids.dtype.kind == "u" else (
-            (raw_ids < 0) | (raw_ids > _INT32_MAX))
-        bad_rows = np.flatnonzero(bad)
-        if bad_rows.size:
-            row = int(bad_rows[0])
-            raise InputError(source, "object_ids",
-                             f"face {label(row)} has object id {int(raw_ids[row])}, outside "
-                             f"[0, {_INT32_MAX}]",
-                             "use non-negative integer object ids (0, 1, 2, ...)")
-        ids = np.array(raw_ids, dtype=np.int32, order="C", copy=True)
+        ids = check_object_ids(object_ids, m, source=source, row_label=label)
 
     return MeshData(vertices=verts, faces=tris, vertices_end=end, rest=rest_arr, object_ids=ids,
                     source=source)
@@ -256,6 +246,9 @@ def validate_mesh(
         InputError: empty mesh; non-numeric dtype; wrong shape (including non-triangle faces);
             non-integer face or object id dtype; a vertex id out of range; a face that lists a
             vertex id twice; two faces with the same three vertex ids; NaN or Inf coordinates;
+            ``vertices`` or ``vertices_end`` whose largest |coordinate| lies outside the range the
+            collision kernels support (:data:`pscc.tolerances.MAX_COORDINATE`,
+            :data:`pscc.tolerances.MIN_COORDINATE_SCALE`; all-zero arrays are accepted);
             per-vertex or per-face arrays whose length does not match; negative object ids.
             The message names the source, the field, the first offending row and the fix.
 

@@ -18,13 +18,14 @@ from typing import Any
 
 import numpy as np
 
+from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
 from pscc.mesh.generate import grid_sheet, icosphere
 from pscc.mesh.io import SUPPORTED_EXTENSIONS, load_mesh
 from pscc.mesh.mesh_data import MeshData
 from pscc.scenes.scene_motions import PivotedMotion, SequenceObstacle
 from pscc.scenes.toml_text import config_to_toml, field_kind
-from pscc.sim.config import ClothMaterial, SolverConfig
+from pscc.sim.config import SIM_MIN_REST_AREA_RATIO, ClothMaterial, SolverConfig
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.obstacles import Handle, KeyframedMotion, Obstacle, rotation_from_axis_angle, static_motion
 from pscc.sim.scene import Scene
@@ -431,6 +432,9 @@ class SceneBuilder:
                                      "give size = [width, height] in metres and cells = [nx, ny]")
             size = self.vector(sheet["size"], f"{key}.sheet.size", 2, minimum=0.0, example="[1.0, 1.0]  # metres")
             cells = self.int_vector(sheet["cells"], f"{key}.sheet.cells", 2, 1, "[20, 20]")
+            triangles = 2 * int(cells[0]) * int(cells[1])
+            check_fits(triangles * SIMULATION_BYTES_PER_TRIANGLE, what=f"a sheet of {triangles:,} triangles",
+                       source=self.source, field=f"{key}.sheet.cells", fix="use fewer cells")
             local, faces, rest = grid_sheet(cells[0], cells[1], size[0], size[1])
             local = local.astype(np.float64) - np.array([size[0] / 2.0, size[1] / 2.0, 0.0])
             rest = rest.astype(np.float64) * scale
@@ -440,7 +444,9 @@ class SceneBuilder:
             mode = self.string(raw.get("rest", "auto"), f"{key}.rest", _REST_MODES)
             local = mesh.vertices.astype(np.float64)
             faces = mesh.faces
+            requested = mode
             rest, mode = self.mesh_rest(mesh, mode, scale, f"{key}.rest", str(mesh_path))
+            self.check_rest_triangles(rest, mesh, requested, mode, f"{key}.rest", str(mesh_path))
             spec["mesh"] = str(mesh_path)
             spec["rest"] = mode
         vertices = (scale * local) @ rotation.T + translation
@@ -478,6 +484,33 @@ class SceneBuilder:
                              "rest = \"plane\" to use the projection onto the best-fit plane anyway (this "
                              "distorts the rest lengths of curved parts)")
         return flat, "plane"
+
+    def check_rest_triangles(self, rest: np.ndarray, mesh: MeshData, requested: str, mode: str, key: str,
+                             mesh_path: str) -> None:
+        """Refuse a rest shape with a zero-area triangle here, naming the scene file and ``key``.
+
+        The solver's cloth model refuses it too (same bound, ``SIM_MIN_REST_AREA_RATIO``), but there
+        the message can only say ``argument: rest``. Causes: a curved mesh projected with
+        ``rest = "plane"``, degenerate rest coordinates in the file, or a zero-area face in the mesh.
+        """
+        bad = _zero_area_faces(np.asarray(rest, dtype=np.float32), mesh.faces)  # float32: what the model sees
+        if not bad.size:
+            return
+        face = int(bad[0])
+        where = f"face {face} {mesh.faces[face].tolist()} of {mesh_path!r} ({bad.size} of {mesh.face_count} faces)"
+        if mode == "plane" and face in set(_zero_area_faces(mesh.vertices, mesh.faces).tolist()):
+            raise self.error(key, f"{where} has zero area in the mesh itself, so it has no rest shape",
+                             "remove the zero-area faces from the mesh, or store (n, 2) (u, v) rest coordinates in "
+                             "an NPZ 'rest' key and use rest = \"file\"")
+        if mode == "plane":
+            how = "rest = \"plane\"" if requested == "plane" else "rest = \"auto\" (the mesh looks flat)"
+            raise self.error(key, f"{how} projects the mesh onto its best-fit plane, which folds {where} to zero "
+                             "area: the mesh is too curved for that projection to be its rest shape",
+                             "store (n, 2) (u, v) rest coordinates (e.g. its UV unwrap, in metres) in an NPZ "
+                             "'rest' key and use rest = \"file\"")
+        raise self.error(key, f"the rest coordinates in the file give {where} zero area",
+                         "give every face three non-collinear (u, v) rest coordinates in the NPZ 'rest' key, or "
+                         "remove that face")
 
     def cloth_handles(self, raw: Mapping[str, Any], piece: _Piece, key: str, spec: dict[str, Any]) -> None:
         """Pins and [[cloth.handles]] of a piece, into ``piece.handles`` and ``spec``."""
@@ -741,6 +774,20 @@ class SceneBuilder:
             frames.append(mesh.vertices.astype(np.float64))
         assert faces is not None
         return files, np.stack(frames), faces
+
+
+def _zero_area_faces(coords: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Faces whose triangle in ``coords`` (2-D or 3-D) has twice its area at most
+    ``SIM_MIN_REST_AREA_RATIO`` x its longest edge squared: the cloth model's test (``pscc.sim.model``)."""
+    corners = np.asarray(coords, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    if corners.shape[2] == 2:
+        twice_area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    else:
+        twice_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+    edges = corners[:, [1, 2, 0]] - corners
+    longest_sq = np.max(np.einsum("mkd,mkd->mk", edges, edges), axis=1)
+    return np.flatnonzero(~(twice_area > SIM_MIN_REST_AREA_RATIO * longest_sq))
 
 
 def _plane_coordinates(points: np.ndarray) -> tuple[np.ndarray, float, float]:

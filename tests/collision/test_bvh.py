@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
 import warp as wp
@@ -135,7 +139,7 @@ def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigi
     assert bvh.face_count == m
     int_arrays = ("left", "right", "parent", "depth", "face_begin", "face_end", "object_id", "panel",
                   "reference_vertex", "contour_offsets", "contour_vertices", "face_order", "face_leaf",
-                  "face_panel", "level_offsets", "level_nodes", "roots", "object_root")
+                  "face_panel", "level_offsets", "level_nodes", "roots", "object_values")
     for name in int_arrays:
         assert getattr(bvh, name).dtype == np.int32, name
     for name in ("is_leaf", "is_rigid", "testable"):
@@ -146,13 +150,12 @@ def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigi
     expected_count = sum(1 if o in rigid else 2 * int(np.sum(object_ids == o)) - 1 for o in objects)
     assert n_nodes == expected_count
 
-    # Roots: one per object, in object order; object_root maps ids to them.
+    # Roots: one per object, in object order; object_values and root_of map ids to them.
     root_nodes = np.flatnonzero(bvh.parent == -1)
     assert bvh.roots.tolist() == root_nodes.tolist()
-    assert bvh.object_id[bvh.roots].tolist() == objects
-    assert bvh.object_root.shape == (max(objects) + 1,)
-    for o in range(max(objects) + 1):
-        assert bvh.object_root[o] == (bvh.roots[objects.index(o)] if o in objects else -1)
+    assert bvh.object_id[bvh.roots].tolist() == objects == bvh.object_values.tolist()
+    for o in sorted({0, *objects, *(o + 1 for o in objects)}):  # every id and the one after it
+        assert bvh.root_of(o) == (bvh.roots[objects.index(o)] if o in objects else -1)
     for root in bvh.roots:
         assert bvh.depth[root] == 0
         covered = bvh.faces_of(int(root))
@@ -181,7 +184,7 @@ def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigi
             assert node in (bvh.left[parent], bvh.right[parent])
     for o in objects:
         if o in rigid:
-            assert bvh.is_rigid[bvh.object_root[o]]
+            assert bvh.is_rigid[bvh.root_of(o)]
         else:
             assert not np.any(bvh.is_rigid[bvh.object_id == o])
 
@@ -329,12 +332,12 @@ def test_objects_panels_and_rigid() -> None:
     ids = np.concatenate([np.full(a.shape[0], 2), np.full(b.shape[0], 2), np.full(c.shape[0], 5),
                           np.full(b.shape[0], 7)]).astype(np.int32)
     bvh = full_check(faces, material, ids, rigid={5})
-    assert bvh.roots.shape == (3,) and bvh.object_root.tolist()[:3] == [-1, -1, int(bvh.roots[0])]
-    assert bvh.is_rigid[bvh.object_root[5]] and bvh.node_count == (2 * 32 - 1) + 1 + (2 * 8 - 1)
-    top = int(bvh.object_root[2])
+    assert bvh.roots.shape == (3,) and [bvh.root_of(o) for o in range(3)] == [-1, -1, int(bvh.roots[0])]
+    assert bvh.is_rigid[bvh.root_of(5)] and bvh.node_count == (2 * 32 - 1) + 1 + (2 * 8 - 1)
+    top = bvh.root_of(2)
     assert bvh.panel[top] == -1 and not bvh.testable[top]
     assert bvh.panel[bvh.left[top]] >= 0 and bvh.panel[bvh.right[top]] >= 0  # two panels: one top node
-    assert np.all(bvh.face_leaf[ids == 5] == bvh.object_root[5])
+    assert np.all(bvh.face_leaf[ids == 5] == bvh.root_of(5))
 
 
 # --- random meshes -----------------------------------------------------------------------------
@@ -477,3 +480,63 @@ def test_large_folded_sheet() -> None:
     assert bvh.node_count == 2 * mesh.face_count - 1
     internal = ~bvh.is_leaf.astype(bool)
     assert bvh.testable[internal].all()
+
+
+@contextlib.contextmanager
+def _address_space_limit(extra_bytes: int) -> Iterator[None]:
+    """Let the process map at most ``extra_bytes`` more, so a runaway allocation fails fast as a MemoryError."""
+    resource = pytest.importorskip("resource")
+    with open("/proc/self/statm") as statm:
+        used = int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    limit = used + extra_bytes
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def test_sparse_object_ids_build_the_same_tree_in_small_memory() -> None:
+    """Ids {5, 7, 2**31 - 1} give the tree of {0, 1, 2}; no table has max id + 1 rows (that took 16 GiB)."""
+    a, ma = cell_grid(4, 3)
+    b, mb = cell_grid(2, 2)
+    c, mc = cell_grid(3, 1)
+    faces = np.vstack([a, b + ma.shape[0], c + ma.shape[0] + mb.shape[0]])
+    material = np.vstack([ma, mb, mc]).astype(np.float32)
+    sizes = (a.shape[0], b.shape[0], c.shape[0])
+    small = np.repeat(np.array([0, 1, 2], dtype=np.int64), sizes)
+    big = 2**31 - 1
+    sparse = np.repeat(np.array([5, 7, big], dtype=np.int64), sizes)
+    reference = build(faces, material, small, rigid={2})
+    with _address_space_limit(1 << 30):
+        bvh = build(faces, material, sparse, rigid={big, 2**70})  # an id no face has is ignored, however large
+    check_tree(bvh, faces, sparse.astype(np.int32), {big})
+    assert bvh.object_values.tolist() == [5, 7, big]
+    assert bvh.root_of(big) == int(bvh.roots[2]) and bvh.root_of(0) == bvh.root_of(big - 1) == -1
+    assert bvh.is_rigid[bvh.root_of(big)]
+    rename = {0: 5, 1: 7, 2: big}
+    for name in ("left", "right", "parent", "depth", "face_begin", "face_end", "is_leaf", "is_rigid", "panel",
+                 "testable", "reference_vertex", "contour_offsets", "contour_vertices", "face_order", "face_leaf"):
+        np.testing.assert_array_equal(getattr(bvh, name), getattr(reference, name), err_msg=name)
+    assert [rename[o] for o in reference.object_id.tolist()] == bvh.object_id.tolist()
+    assert bvh.roots.tolist() == reference.roots.tolist()
+    def host_sizes(tree: MaterialBvh) -> dict[str, int]:
+        return {name: value.size for name, value in vars(tree).items() if isinstance(value, np.ndarray)}
+
+    assert host_sizes(bvh) == host_sizes(reference)  # every table as small as with ids 0, 1, 2
+    assert bvh.device_bytes == reference.device_bytes
+
+
+@pytest.mark.parametrize("bad", [-1, 2**31, 2**40])
+def test_object_ids_outside_int32_are_refused(bad: int) -> None:
+    _, faces, rest = grid_sheet(2, 2)
+    topology = MeshTopology.from_faces(faces, rest.shape[0])
+    ids = np.zeros(faces.shape[0], dtype=np.int64)
+    ids[3] = bad
+    with pytest.raises(InputError) as caught:
+        MaterialBvh.build(faces, rest, ids, topology)
+    assert (caught.value.source, caught.value.field) == ("argument", "object_ids")
+    assert f"has object id {bad}, outside [0, 2147483647]" in caught.value.problem

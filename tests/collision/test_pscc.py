@@ -370,3 +370,72 @@ def test_ccd_recheck_of_moved_vertices_equals_a_full_run() -> None:
         det.narrow_phase(current, thickness=h)
         det.broad_phase(mesh.vertices, current, thickness=h)
         assert _rows(det.narrow_phase(mesh.vertices, current, 0.0, recheck=True)) == _rows(full)
+
+
+def _two_pieces() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """A cloth and a second folded piece pushed into it: faces, rest, x0, x1 and the cloth's face count."""
+    cloth = folded_sheet(300, layers=2, seed=3)
+    other = folded_sheet(200, layers=3, seed=4)
+    faces = np.concatenate([cloth.faces, other.faces + len(cloth.vertices)])
+    rest = np.concatenate([cloth.rest, other.rest])
+    x0 = np.concatenate([cloth.vertices, other.vertices + np.float32([0.1, 0.05, 0.25])])
+    x1 = np.concatenate([cloth.vertices_end, other.vertices_end - np.float32([0.0, 0.0, 0.05])])
+    return faces, rest, x0, x1, len(cloth.faces)
+
+
+@pytest.mark.parametrize("method", ["brute-force", "spatial-hash", "pscc"])
+def test_sparse_object_ids_give_the_same_pairs_in_the_same_memory(method: str) -> None:
+    """Ids need not be contiguous: {7, 2**31 - 1} gives the pairs of {0, 1} with no table of max id + 1 rows."""
+    faces, rest, x0, x1, cloth_faces = _two_pieces()
+    results, memory = [], []
+    for low, high in ((0, 1), (7, 2**31 - 1)):
+        ids = np.concatenate([np.full(cloth_faces, low), np.full(len(faces) - cloth_faces, high)]).astype(np.int64)
+        det = CollisionDetector(faces, method=method, object_ids=ids, rest=rest, device="cpu",
+                                rigid_objects=(high,) if method == "pscc" else ())
+        results.append(det.detect(x0, x1))
+        memory.append(det.device_bytes()["total"])
+        if method == "pscc":
+            assert det.bvh.object_values.tolist() == [low, high]
+            assert det.bvh.is_rigid[det.bvh.root_of(high)] and det.bvh.root_of(3) == -1
+            assert max(getattr(det.bvh, name).nbytes for name in vars(det.bvh)
+                       if isinstance(getattr(det.bvh, name), np.ndarray)) < 64 * len(faces)
+    small, large = results
+    assert len(small.vertex_face) + len(small.edge_edge) > 0
+    for name in ("vertex_face", "edge_edge", "vertex_face_toi", "edge_edge_toi"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(large, name), err_msg=name)
+    for key in ("self_triangle_pairs", "inter_triangle_pairs", "triangle_pairs", "candidate_pairs", "front_size"):
+        assert small.stats[key] == large.stats[key], key
+    assert memory[0] == memory[1]
+
+
+@pytest.mark.parametrize("bad", [-1, 2**31, 2**40])
+def test_object_ids_outside_int32_are_refused_at_construction(bad: int) -> None:
+    faces, _, _, _, _ = _two_pieces()
+    ids = np.zeros(len(faces), dtype=np.int64)
+    ids[5] = bad
+    with pytest.raises(InputError) as caught:
+        CollisionDetector(faces, object_ids=ids)
+    error = caught.value
+    assert (error.source, error.field) == ("argument", "object_ids")
+    assert f"row 5 has object id {bad}, outside [0, 2147483647]" in error.problem and error.fix
+
+
+def test_short_positions_are_named_with_the_rows_they_need() -> None:
+    mesh = folded_sheet(300, layers=2, seed=6)
+    needed = int(mesh.faces.max()) + 1
+    for call in ("detect", "broad_phase", "prepare"):
+        det = CollisionDetector(mesh.faces, rest=mesh.rest)
+        with pytest.raises(InputError) as caught:
+            getattr(det, call)(mesh.vertices[:10])
+        error = caught.value
+        assert (error.source, error.field) == ("argument", "positions"), str(error)
+        assert "(10, 3)" in error.problem and f"at least {needed} rows" in error.problem, str(error)
+        assert f"({needed}, 3)" in error.problem and "faces:" not in str(error)
+
+
+def test_faces_and_rigid_objects_that_overflow_are_refused() -> None:
+    faces = np.array([[0, 1, 2], [1, 2, 2**32]], dtype=np.int64)  # 2**32 would wrap to vertex 0 in int32
+    with pytest.raises(InputError, match=r"argument: faces: vertex id 4294967296 is outside"):
+        CollisionDetector(faces)
+    with pytest.raises(InputError, match=r"argument: rigid_objects: .*Fix: pass e\.g\."):
+        CollisionDetector(faces[:1], rigid_objects=["glass"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdValidation
 
-from pscc.errors import InputError
+from pscc.errors import InputError, OutputError
 from pscc.io import formats
 from pscc.io.formats import (
     FORMATS,
@@ -27,6 +28,7 @@ from pscc.io.formats import (
 )
 from pscc.io.frames import FRAME_KEYS, frame_path, read_frame
 from pscc.mesh import load_mesh
+from pscc.tolerances import MAX_COORDINATE
 
 # Two cloth pieces (a square: ids 0, a triangle: id 3, ids need not be contiguous) and a tetrahedron.
 CLOTH_FACES = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]], dtype=np.int32)
@@ -50,6 +52,12 @@ def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     a, b = np.asarray(a), np.asarray(b)
     return a.dtype == b.dtype == np.float32 and a.shape == b.shape and np.array_equal(a.view(np.uint32),
                                                                                        b.view(np.uint32))
+
+
+def in_detector_range(points: np.ndarray) -> np.ndarray:
+    """``points`` with magnitudes above ``MAX_COORDINATE`` clamped (``load_mesh`` refuses larger ones)."""
+    limit = np.float32(MAX_COORDINATE)
+    return np.where(np.abs(points) > limit, np.copysign(limit, points), points).astype(np.float32)
 
 
 def frames(count: int, obstacles: bool, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray | None]]:
@@ -119,6 +127,7 @@ def test_obj_ply_round_trip_is_exact(tmp_path: Path, kind: str, obstacles: bool)
 
 def test_obj_layout_one_object_per_piece(tmp_path: Path) -> None:
     (cloth, others), = frames(1, True)
+    cloth, others = in_detector_range(cloth), in_detector_range(others)  # load_mesh checks the range
     path = write_obj_frame(tmp_path, 0, cloth, CLOTH_FACES, CLOTH_IDS, others, OBSTACLE_FACES)
     lines = path.read_text().splitlines()
     assert [line for line in lines if line.startswith("o ")] == ["o cloth_0", "o cloth_3", "o obstacles"]
@@ -143,6 +152,7 @@ def test_obj_sorts_interleaved_pieces_stably(tmp_path: Path) -> None:
 def test_ply_object_ids_survive_trimesh(tmp_path: Path) -> None:
     """The per-face object_id (obstacles: max cloth id + 1) reads back through trimesh's PLY reader."""
     (cloth, others), = frames(1, True)
+    cloth, others = in_detector_range(cloth), in_detector_range(others)  # load_mesh checks the range
     path = write_ply_frame(tmp_path, 0, cloth, CLOTH_FACES, CLOTH_IDS, others, OBSTACLE_FACES)
     assert b"format binary_little_endian 1.0" in path.read_bytes()[:200]
     mesh = load_mesh(path)
@@ -296,14 +306,14 @@ def test_failed_save_leaves_old_file_and_no_temporary(tmp_path: Path, monkeypatc
     obj_before = obj.read_bytes()
 
     def broken_replace(source: str, target: str) -> None:
-        raise OSError("disk full")
+        raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(os, "replace", broken_replace)
     writer = UsdAnimationWriter(path, CLOTH_FACES, CLOTH_IDS, None, FPS, resume_from=1)
     writer.add_frame(1, *data[1])
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="animation.usd: path: cannot be written: the disk is full"):
         writer.save()
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="frame_00000.obj: path: cannot be written: the disk is full"):
         write_obj_frame(tmp_path, 0, data[1][0], CLOTH_FACES, CLOTH_IDS)
     assert path.read_bytes() == before and obj.read_bytes() == obj_before
     assert hidden_files(tmp_path) == []
@@ -385,3 +395,96 @@ def test_frame_writer_resume_fills_usd_gap_from_npz(tmp_path: Path) -> None:
 def test_module_exports_are_documented() -> None:
     for name in formats.__all__:
         assert getattr(formats, name).__doc__ or name == "FORMATS", name
+
+
+# --------------------------------------------------------------------------------------------
+# Frame readers: integers that overflow, counts the file cannot hold, non-finite coordinates
+# --------------------------------------------------------------------------------------------
+
+_OBJ_TRIANGLE = "o cloth_0\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+@pytest.mark.parametrize(("text", "line", "words"), [
+    (_OBJ_TRIANGLE + "f 1 2 99999999999999999999999\n", 5, ("99999999999999999999999", "out of range")),
+    (_OBJ_TRIANGLE + "f 1 2 -2147483649\n", 5, ("-2147483649", "out of range")),
+    ("o cloth_99999999999999999999\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", 1, ("object id", "2147483647")),
+    ("o cloth_" + "7" * 5000 + "\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", 1, ("object id", "(5000 characters)")),
+    ("o cloth_0\nv 0 0 0\nv 1e999 0 0\nv 0 1 0\nf 1 2 3\n", 3, ("NaN or Inf",)),
+    ("o cloth_0\nv 0 0 0\nv 1 0 0\nv 0 1e300 0\nf 1 2 3\n", 4, ("NaN or Inf",)),
+    (_OBJ_TRIANGLE + "f 1 2 3\no obstacles\nv 0 0 0\nv 0 -inf 0\n", 8, ("NaN or Inf",)),
+])
+def test_obj_frame_reader_refuses_overflow_and_non_finite(tmp_path: Path, text: str, line: int,
+                                                          words: tuple[str, ...]) -> None:
+    path = tmp_path / "frame.obj"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        read_obj_frame(path)
+    error = info.value
+    assert (error.source, error.field) == (str(path), f"line {line}"), str(error)
+    assert all(word in error.problem for word in words), str(error)
+    assert error.fix and len(str(error)) < 400
+
+
+def _ply_frame_bytes(vertex_count: object = 3, face_count: object = 1, *, index_type: str = "int",
+                     id_type: str | None = None, points: np.ndarray | None = None, face: bytes | None = None,
+                     comment: str = "") -> bytes:
+    header = (f"ply\nformat binary_little_endian 1.0\n{comment}element vertex {vertex_count}\nproperty float x\n"
+              f"property float y\nproperty float z\nelement face {face_count}\n"
+              f"property list uchar {index_type} vertex_indices\n"
+              + (f"property {id_type} object_id\n" if id_type else "") + "end_header\n")
+    if points is None:
+        points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    if face is None:
+        face = np.array([3], "u1").tobytes() + np.array([0, 1, 2], "<i4").tobytes()
+    return header.encode() + np.asarray(points, "<f4").tobytes() + face
+
+
+def _face(indices: list[int], index_type: str = "<i4", object_id: tuple[str, int] | None = None) -> bytes:
+    data = np.array([3], "u1").tobytes() + np.array(indices, index_type).tobytes()
+    return data + (np.array([object_id[1]], object_id[0]).tobytes() if object_id else b"")
+
+
+@pytest.mark.parametrize(("data", "field", "words"), [
+    (_ply_frame_bytes(vertex_count=99999999999999999999), "vertex", ("99999999999999999999 vertex rows",)),
+    (_ply_frame_bytes(face_count=10**12), "face", ("1000000000000 face rows",)),
+    (_ply_frame_bytes(face_count=-1), "header", ("'element face -1'", "count >= 0")),
+    (_ply_frame_bytes(vertex_count="1e3"), "header", ("'element vertex 1e3'",)),
+    (_ply_frame_bytes(comment="comment pscc cloth_vertices x cloth_faces 1\n"), "comment", ("not a count",)),
+    (_ply_frame_bytes(index_type="uint", face=_face([0, 1, 2**32 - 1], "<u4")), "face 0",
+     ("4294967295", "outside the cloth vertices [0, 3)")),
+    (_ply_frame_bytes(face=_face([0, 1, 7])), "face 0", ("[0, 1, 7]", "outside the cloth vertices")),
+    (_ply_frame_bytes(id_type="uint", face=_face([0, 1, 2], object_id=("<u4", 2**32 - 1))), "face 0",
+     ("object id 4294967295", "[0, 2147483647]")),
+    (_ply_frame_bytes(id_type="int", face=_face([0, 1, 2], object_id=("<i4", -4))), "face 0", ("object id -4",)),
+    (_ply_frame_bytes(points=np.array([[0, 0, 0], [np.inf, 0, 0], [0, 1, 0]])), "vertex 1", ("NaN or Inf",)),
+])
+def test_ply_frame_reader_refuses_overflow_and_absurd_counts(tmp_path: Path, data: bytes, field: str,
+                                                             words: tuple[str, ...]) -> None:
+    path = tmp_path / "frame.ply"
+    path.write_bytes(data)
+    with pytest.raises(InputError) as info:
+        read_ply_frame(path)
+    error = info.value
+    assert (error.source, error.field) == (str(path), field), str(error)
+    assert all(word in error.problem for word in words), str(error)
+    assert error.fix
+
+
+def test_frame_readers_keep_the_largest_object_id(tmp_path: Path) -> None:
+    (cloth, _), = frames(1, False)
+    ids = np.array([0, 0, 2**31 - 1], dtype=np.int32)
+    np.testing.assert_array_equal(read_obj_frame(write_obj_frame(tmp_path, 0, cloth, CLOTH_FACES, ids))["object_ids"],
+                                  ids)
+    path = tmp_path / "largest.ply"
+    path.write_bytes(_ply_frame_bytes(id_type="int", face=_face([0, 1, 2], object_id=("<i4", 2**31 - 1))))
+    assert read_ply_frame(path)["object_ids"].tolist() == [2**31 - 1]
+
+
+def test_writers_give_obstacles_a_free_id_beside_the_largest_cloth_id(tmp_path: Path) -> None:
+    (cloth, others), = frames(1, True)
+    ids = np.array([0, 0, 2**31 - 1], dtype=np.int32)
+    frame = read_ply_frame(write_ply_frame(tmp_path, 0, cloth, CLOTH_FACES, ids, others, OBSTACLE_FACES))
+    assert frame["object_ids"].tolist() == ids.tolist()
+    with UsdAnimationWriter(tmp_path / "a.usd", CLOTH_FACES, ids, OBSTACLE_FACES, FPS) as writer:
+        writer.add_frame(0, cloth, others)
+    assert len(read_usd_frames(tmp_path / "a.usd")) == 1

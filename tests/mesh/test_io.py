@@ -256,6 +256,21 @@ def test_obj_rejects_with_line_number(tmp_path: Path, body, line, words, fix_wor
                  fix_words=fix_words)
 
 
+@pytest.mark.parametrize("index", ["99999999999999999999999", "2147483648", "-99999999999999999999999", "9" * 200])
+def test_obj_face_index_too_large_is_refused(tmp_path: Path, index: str) -> None:
+    """A face index beyond int32 names no vertex; it used to overflow into an OverflowError traceback."""
+    path = write(tmp_path / "big.obj", f"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 {index}\n")
+    error = expect_error(lambda: load_mesh(path), source=str(path), field="line 4",
+                         words=("vertex index", "out of range", "2147483647"), fix_words=("between 1 and",))
+    assert len(str(error)) < 400
+
+
+@pytest.mark.parametrize(("coordinate", "field"), [("1e999", "line 2"), ("-inf", "line 2"), ("1e300", "vertices")])
+def test_obj_coordinates_beyond_float32_are_refused(tmp_path: Path, coordinate: str, field: str) -> None:
+    path = write(tmp_path / "far.obj", f"v 0 0 0\nv {coordinate} 0 0\nv 0 1 0\nf 1 2 3\n")
+    expect_error(lambda: load_mesh(path), source=str(path), field=field, words=("Inf",))
+
+
 def test_obj_duplicate_face_names_lines(tmp_path: Path) -> None:
     path = write(tmp_path / "dup.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# x\nf 3 1 2\n")
     expect_error(lambda: load_mesh(path), source=str(path), field="faces",
@@ -495,3 +510,99 @@ def test_load_positions_bad_count_argument(tmp_path: Path) -> None:
     path = tmp_path / "end.npz"
     np.savez(path, vertices=SQUARE_V)
     expect_error(lambda: load_positions(path, -1), source="argument", field="vertex_count")
+
+
+# --------------------------------------------------------------------------------------------
+# PLY: absurd counts and integers that overflow
+# --------------------------------------------------------------------------------------------
+
+PLY_HEADER = ("ply\nformat {fmt} 1.0\nelement vertex {vertices}\nproperty float x\nproperty float y\n"
+              "property float z\nelement face {faces}\nproperty list {count} int vertex_indices\nend_header\n")
+TRIANGLE_ASCII = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+TRIANGLE_BINARY = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes() + struct.pack("<B3i", 3, 0, 1, 2)
+
+
+def ply_bytes(fmt: str, vertices: object = 3, faces: object = 1, count: str = "uchar",
+              body: bytes | None = None) -> bytes:
+    header = PLY_HEADER.format(fmt=fmt, vertices=vertices, faces=faces, count=count).encode()
+    if body is None:
+        body = TRIANGLE_ASCII.encode() if fmt == "ascii" else TRIANGLE_BINARY
+    return header + body
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+@pytest.mark.parametrize(("element", "count"), [("vertex", 99999999999999999999), ("vertex", 2**33),
+                                                ("face", 10**9), ("face", 99999999999999999999)])
+def test_ply_counts_the_file_cannot_hold_are_refused(tmp_path: Path, fmt: str, element: str, count: int) -> None:
+    """Checked against the file size before anything is read or allocated."""
+    path = tmp_path / "absurd.ply"
+    path.write_bytes(ply_bytes(fmt, **{"vertices" if element == "vertex" else "faces": count}))
+    expect_error(lambda: load_mesh(path), source=str(path), field=element,
+                 words=(f"declares {count} {element} rows", "more than the file can hold"), fix_words=("re-export",))
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+@pytest.mark.parametrize("line", ["element vertex -3", "element face -1", "element vertex 1e3", "element vertex"])
+def test_ply_malformed_counts_are_refused(tmp_path: Path, fmt: str, line: str) -> None:
+    data = ply_bytes(fmt).decode("latin-1")
+    target = "element vertex 3" if "vertex" in line else "element face 1"
+    path = tmp_path / "negative.ply"
+    path.write_bytes(data.replace(target, line).encode("latin-1"))
+    lineno = 3 if "vertex" in line else 7
+    expect_error(lambda: load_mesh(path), source=str(path), field=f"header line {lineno}",
+                 words=(repr(line), "count >= 0"), fix_words=("element NAME COUNT",))
+
+
+@pytest.mark.parametrize(("face_line", "words"), [
+    ("99999999999999999999 0 1 2", ("list length of vertex_indices", "uchar [0, 255]")),
+    ("255 0 1 2", ("declares 255 values", "holds 3")),
+    ("3 0 1 99999999999999999999", ("vertex index 1e+20", "int [-2147483648, 2147483647]")),
+    ("3 0 1 2147483648", ("vertex index 2147483648", "int [")),
+    ("3 0 1 2.5", ("vertex index 2.5",)),
+])
+def test_ply_ascii_integers_are_checked_against_their_type(tmp_path: Path, face_line: str,
+                                                           words: tuple[str, ...]) -> None:
+    """trimesh ignored the list length and wrapped huge indices to -2147483648; pscc reads ASCII itself."""
+    path = tmp_path / "huge.ply"
+    path.write_bytes(ply_bytes("ascii", body=f"0 0 0\n1 0 0\n0 1 0\n{face_line}\n".encode()))
+    error = expect_error(lambda: load_mesh(path), source=str(path), field="face 0", words=words,
+                         fix_words=("re-export",))
+    assert len(str(error)) < 400
+
+
+@pytest.mark.parametrize(("count_type", "packed"), [("int", struct.pack("<i", 2**31 - 1)),
+                                                    ("uint", struct.pack("<I", 2**32 - 1)),
+                                                    ("int", struct.pack("<i", -5))])
+def test_ply_binary_list_length_is_checked_before_trimesh_sizes_rows(tmp_path: Path, count_type: str,
+                                                                     packed: bytes) -> None:
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes()
+    path = tmp_path / "list.ply"
+    path.write_bytes(ply_bytes("binary_little_endian", count=count_type,
+                               body=vertices + packed + struct.pack("<3i", 0, 1, 2)))
+    length = struct.unpack("<i" if count_type == "int" else "<I", packed)[0]
+    expect_error(lambda: load_mesh(path), source=str(path), field="face 0",
+                 words=(f"face has {length} vertices", "triangles"), fix_words=("triangulate",))
+
+
+def test_ply_ascii_object_ids_and_extra_properties_still_load(tmp_path: Path) -> None:
+    text = ("ply\nformat ascii 1.0\ncomment made by hand\nelement vertex 4\nproperty float x\nproperty float y\n"
+            "property float z\nproperty uchar red\nelement face 2\nproperty int object_id\n"
+            "property list uchar int vertex_indices\nproperty list uchar float texcoord\n"
+            "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n"
+            "0 0 0 255\n1 0 0 3\n1 1 0 4\n0 1 0 5\n5 3 0 1 2 6 0 0 1 0 1 1\n2147483647 3 0 2 3 0\n0 1\n")
+    mesh = load_mesh(write(tmp_path / "extra.ply", text))
+    np.testing.assert_array_equal(mesh.faces, SQUARE_F)
+    np.testing.assert_array_equal(mesh.vertices, SQUARE_V)
+    assert mesh.object_ids.tolist() == [5, 2**31 - 1]
+
+
+@pytest.mark.parametrize(("vertex_line", "field", "words"), [
+    ("1e999 0 0", "vertices", ("NaN or Inf",)),
+    ("1 0", "vertex 1", ("ends before property z",)),
+    ("1 0 0 7", "vertex 1", ("holds 4 values", "1 more than its properties")),
+    ("1 zero 0", "vertex 1", ("'zero'", "not a number")),
+])
+def test_ply_ascii_bad_vertex_rows(tmp_path: Path, vertex_line: str, field: str, words: tuple[str, ...]) -> None:
+    path = tmp_path / "rows.ply"
+    path.write_bytes(ply_bytes("ascii", body=f"0 0 0\n{vertex_line}\n0 1 0\n3 0 1 2\n".encode()))
+    expect_error(lambda: load_mesh(path), source=str(path), field=field, words=words)

@@ -205,6 +205,51 @@ def test_curved_mesh_without_rest_is_refused_unless_projected(tmp_path: Path) ->
     np.testing.assert_allclose(scene.rest, local[:, :2] - local[:, :2].mean(axis=0), atol=1e-6)
 
 
+def _rest_cases(directory: Path) -> dict[str, tuple[str, str]]:
+    """Scene texts whose rest shape has a zero-area triangle, and a word each message must hold."""
+    local, faces, rest = grid_sheet(4, 4, 1.0, 1.0)
+    tube = local.astype(np.float64)
+    angle = 1.9 * np.pi * local[:, 0]  # rolled almost all the way round: the projection folds it flat
+    tube[:, 0], tube[:, 2] = np.cos(angle), np.sin(angle)
+    np.savez(directory / "tube.npz", vertices=tube, faces=faces)
+    collapsed = rest.copy()
+    collapsed[:, 1] = 0.0  # every rest triangle collinear
+    np.savez(directory / "collapsed.npz", vertices=local, faces=faces, rest=collapsed)
+    sliver = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], dtype=np.float64)
+    _write_obj(directory / "sliver.obj", sliver, np.array([[0, 1, 2], [0, 1, 3]]))  # face 1 has zero area
+    return {
+        "plane on a curved mesh": ('[[cloth]]\nmesh = "tube.npz"\nrest = "plane"\n', "too curved"),
+        "degenerate rest in the file": ('[[cloth]]\nmesh = "collapsed.npz"\nrest = "file"\n', "rest coordinates"),
+        "auto on a zero-area face": ('[[cloth]]\nmesh = "sliver.obj"\n', "zero area in the mesh itself"),
+    }
+
+
+@pytest.mark.parametrize("case", ["plane on a curved mesh", "degenerate rest in the file", "auto on a zero-area face"])
+def test_zero_area_rest_triangles_name_the_scene_file_and_key(tmp_path: Path, case: str) -> None:
+    """Used to surface only when the solver was built, as 'argument: rest: ...'."""
+    text, word = _rest_cases(tmp_path)[case]
+    path = _write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        load_scene_file(path)
+    error = info.value
+    assert (error.source, error.field) == (str(path), "cloth[0].rest"), str(error)
+    assert str(error).startswith(f"{path}: cloth[0].rest: ") and "argument" not in str(error)
+    assert word in error.problem and "zero area" in error.problem and error.fix, str(error)
+
+
+def test_bad_rest_values_name_the_scene_file_and_key(tmp_path: Path) -> None:
+    local, faces, _ = grid_sheet(2, 2, 1.0, 1.0)
+    np.savez(tmp_path / "flat.npz", vertices=local, faces=faces)
+    for value, pattern in (('"plan"', r"'plan' is not one of.*did you mean 'plane'"),
+                           ("3", r"expected a string, got integer 3"),
+                           ('"file"', r'rest = "file" but .*flat\.npz.* has no rest coordinates')):
+        path = _write(tmp_path, f'[[cloth]]\nmesh = "flat.npz"\nrest = {value}\n')
+        with pytest.raises(InputError) as info:
+            load_scene_file(path)
+        assert str(info.value).startswith(f"{path}: cloth[0].rest: "), str(info.value)
+        assert re.search(pattern, str(info.value)), str(info.value)
+
+
 def test_vertex_selectors(tmp_path: Path) -> None:
     # 4 x 2 cells: vertex j * 5 + i at (i / 4, j / 4) before centring; rest = those coordinates.
     text = SHEET.replace("[cloth.sheet]", 'pins = [3, { side = ["top", "left"] }, { corner = "bottom-right" }, '
