@@ -1,7 +1,15 @@
 """Command-line interface: ``pscc detect``, ``demo``, ``simulate`` and ``scenes`` (also ``python -m pscc``).
 
-The CLI only parses arguments, calls the public API and prints. Any :class:`pscc.PsccError`
-becomes one line on stderr and exit status 2; nothing is written in that case.
+The CLI only parses arguments, calls the public API and prints. Exit statuses:
+
+====  =====================================================================================
+0     success
+1     an internal error (a bug in pscc): one line; set ``PSCC_TRACEBACK=1`` for the traceback
+2     bad input or an output that cannot be written (any :class:`pscc.PsccError`, an OS error,
+      not enough memory): one line on stderr naming the file, the field and the fix; nothing
+      is left half-written
+130   interrupted (Ctrl-C): one line; a simulation keeps its last checkpoint for ``--resume``
+====  =====================================================================================
 """
 
 from __future__ import annotations
@@ -10,32 +18,43 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
-from pscc.errors import InputError, PsccError
+from pscc._atomic import write_atomic
+from pscc.errors import InputError, OutputError, PsccError
+from pscc.io.run_folder import RunFolder, write_text_atomic
+
+EXIT_INTERNAL_ERROR = 1
+"""Exit status for an internal error (a bug in pscc)."""
 
 EXIT_INPUT_ERROR = 2
-"""Exit status for bad input (any :class:`pscc.PsccError`)."""
+"""Exit status for bad input or an unwritable output (any :class:`pscc.PsccError`)."""
+
+EXIT_INTERRUPTED = 130
+"""Exit status after Ctrl-C (128 + SIGINT)."""
+
+RENDER_FILES: tuple[str, ...] = ("preview.png", "animation.mp4")
+"""Files ``--render`` adds to a run folder."""
 
 
-def _write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write an NPZ file through a temporary file in the same folder and an atomic rename."""
-    folder = path.parent if str(path.parent) else Path(".")
+def _check_output_file(out: Path, inputs: list[str]) -> None:
+    """Refuse an ``--out`` path before any work: wrong suffix, an input file, a folder, an unwritable folder."""
+    if out.suffix.lower() != ".npz":
+        raise InputError(str(out), "--out", "the output must be an .npz file", "end the path in .npz")
+    for name in inputs:
+        if out.resolve() == Path(name).resolve() or (out.exists() and os.path.samefile(out, name)):
+            raise InputError(str(out), "--out", f"is the input file {name}; writing would destroy it",
+                             "name a new file for the pairs")
+    if out.is_dir():
+        raise InputError(str(out), "--out", "is a folder", "name a file, e.g. pairs.npz")
+    folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
-        raise InputError(str(path), "--out", f"folder {folder} does not exist", "create it or pick another path")
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            np.savez(stream, **arrays)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
+        raise InputError(str(out), "--out", f"folder {folder} does not exist", "create it or pick another path")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(str(out), "--out", f"folder {folder} is not writable", "pick a writable folder")
 
 
 def _result_arrays(result: Any) -> dict[str, np.ndarray]:
@@ -68,13 +87,15 @@ def _detect(args: argparse.Namespace) -> int:
     if args.end is not None:
         positions_end = load_positions(args.end, mesh.vertex_count)
     out = Path(args.out) if args.out else None
-    if out is not None and out.suffix.lower() != ".npz":
-        raise InputError(str(out), "--out", "the output must be an .npz file", "end the path in .npz")
+    if out is not None:
+        _check_output_file(out, [args.mesh, *([args.end] if args.end else [])])
+    device = _device(args.device)
     detector = CollisionDetector(mesh.faces, method=args.method, object_ids=mesh.object_ids, rest=mesh.rest,
-                                 device=args.device)
+                                 device=device)
     result = detector.detect(mesh.vertices, positions_end, thickness=args.thickness)
     if out is not None:
-        _write_npz_atomic(out, _result_arrays(result))
+        arrays = _result_arrays(result)
+        write_atomic(out, lambda stream: np.savez(stream, **arrays), field="--out")
     if args.json:
         print(json.dumps(result.stats))
     else:
@@ -92,14 +113,12 @@ DEMO_GPU_TRIANGLES = 200_000
 
 
 def _demo(args: argparse.Namespace) -> int:
-    import warp as wp
-
     from pscc.render.video import render_run
     from pscc.scenes import build_scene
-    from pscc.sim.simulation import Simulation
+    from pscc.sim.simulation import Simulation, scene_identity
 
-    device = args.device or ("cuda:0" if wp.is_cuda_available() else "cpu")
-    on_gpu = wp.get_device(device).is_cuda
+    device = _device(args.device) if args.device else ("cuda:0" if _cuda_available() else "cpu")
+    on_gpu = device.startswith("cuda")
     triangles = args.triangles or (DEMO_GPU_TRIANGLES if on_gpu else DEMO_CPU_TRIANGLES)
     if args.frames < 1:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
@@ -108,12 +127,15 @@ def _demo(args: argparse.Namespace) -> int:
     print(f"pscc demo on {device}: scene '{scene.name}' ({scene.description}), "
           f"{scene.faces.shape[0]:,} cloth triangles, {args.frames} frames at {1.0 / scene.frame_time:g} fps")
     simulation = Simulation(scene, device=device)
-    identity = {"scene": scene.name, "cloth_triangles": int(scene.faces.shape[0]), "demo": True}
-    stats = simulation.run(args.frames, out_dir, progress=not args.no_progress, identity=identity, overwrite=True)
-    per_frame = [f["seconds_total"] for f in stats["frames"]]
-    print(f"Simulated {len(per_frame)} frames in {sum(per_frame):.1f} s "
-          f"({sum(per_frame) / len(per_frame):.2f} s per frame), every frame intersection-free")
-    preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=device, progress=not args.no_progress)
+    identity = {**scene_identity(scene, simulation.solver.contact), "demo": True}
+    with RunFolder(out_dir, identity).open(resume=False, overwrite=True) as folder:
+        stats = simulation.run(args.frames, folder, progress=not args.no_progress)
+        per_frame = [f["seconds_total"] for f in stats["frames"]]
+        print(f"Simulated {len(per_frame)} frames in {sum(per_frame):.1f} s "
+              f"({sum(per_frame) / len(per_frame):.2f} s per frame), every frame intersection-free")
+        folder.record(*RENDER_FILES)
+        preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=device,
+                                    progress=not args.no_progress)
     print("Outputs:")
     print(f"  frames   {out_dir}/frames/frame_00000.npz ... frame_{args.frames:05d}.npz")
     print(f"  picture  {preview}")
@@ -124,14 +146,19 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     from pscc.io.formats import parse_formats
-    from pscc.io.run_folder import write_text_atomic
     from pscc.scenes.registry import open_scene
     from pscc.sim.contact_config import ContactConfig
     from pscc.sim.simulation import Simulation
 
     if args.frames is not None and args.frames < 1:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
+    if args.checkpoint_every < 1:
+        raise InputError("argument", "--checkpoint-every", f"{args.checkpoint_every} is below 1", "pass 1 or more")
+    if args.resume and args.overwrite:
+        raise InputError("argument", "--resume", "--resume and --overwrite contradict each other",
+                         "pass --resume to continue the run, or --overwrite to start it over")
     formats = parse_formats(args.format)
+    device = _device(args.device)
     source = open_scene(args.scene, triangles=args.triangles, scale=args.scale)
     scene = source.scene
     frames = args.frames if args.frames is not None else source.frames
@@ -140,29 +167,34 @@ def _simulate(args: argparse.Namespace) -> int:
         contact = ContactConfig(**{**contact.__dict__, "method": args.method})
     contact.validate()
     out_dir = Path(args.out_dir)
-    print(f"{scene.name}: {scene.description}; {scene.faces.shape[0]:,} cloth triangles, "
-          f"{sum(o.faces.shape[0] for o in scene.obstacles):,} obstacle triangles, dt = {scene.time_step:.4g} s")
-    simulation = Simulation(scene, device=args.device, contact=contact)
-    identity = {**source.identity, "method": contact.method}
     resolved = source.resolved_toml(frames, contact)
-    stats = simulation.run(frames, out_dir, progress=not args.no_progress, identity=identity,
-                           resume=args.resume, overwrite=args.overwrite, checkpoint_every=args.checkpoint_every,
-                           formats=formats, before_first_frame=lambda: write_text_atomic(out_dir / "scene.toml",
-                                                                                          resolved))
-    per_frame = [f["seconds_total"] for f in stats["frames"]]
-    print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / max(1, len(per_frame)):.2f} s per "
-          f"frame) on {stats['device']}")
-    print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{frames:05d}.npz, {out_dir}/stats.json and "
-          f"{out_dir}/scene.toml")
-    for name, where in (("obj", "obj/frame_*.obj"), ("ply", "ply/frame_*.ply"), ("usd", "animation.usd")):
-        if name in formats:
-            print(f"Wrote {out_dir}/{where}")
-    if args.render:
-        from pscc.render.video import render_run
+    with RunFolder(out_dir, source.run_identity(contact)).open(resume=args.resume, overwrite=args.overwrite) as folder:
+        described = f"{scene.name}: {scene.description}" if scene.description else scene.name
+        print(f"{described}; {scene.faces.shape[0]:,} cloth triangles, "
+              f"{sum(o.faces.shape[0] for o in scene.obstacles):,} obstacle triangles, dt = {scene.time_step:.4g} s")
+        simulation = Simulation(scene, device=device, contact=contact)
 
-        preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=args.device,
-                                    progress=not args.no_progress)
-        print(f"Rendered {preview} and {video}")
+        def write_scene_file() -> None:
+            folder.record("scene.toml")
+            write_text_atomic(out_dir / "scene.toml", resolved, field="--out-dir")
+
+        stats = simulation.run(frames, folder, progress=not args.no_progress, checkpoint_every=args.checkpoint_every,
+                               formats=formats, before_first_frame=write_scene_file)
+        per_frame = [f["seconds_total"] for f in stats["frames"]]
+        print(f"{len(per_frame)} frames in {sum(per_frame):.1f} s ({sum(per_frame) / max(1, len(per_frame)):.2f} s "
+              f"per frame) on {stats['device']}")
+        print(f"Wrote {out_dir}/frames/frame_00000.npz ... frame_{frames:05d}.npz, {out_dir}/stats.json and "
+              f"{out_dir}/scene.toml")
+        for name, where in (("obj", "obj/frame_*.obj"), ("ply", "ply/frame_*.ply"), ("usd", "animation.usd")):
+            if name in formats:
+                print(f"Wrote {out_dir}/{where}")
+        if args.render:
+            from pscc.render.video import render_run
+
+            folder.record(*RENDER_FILES)
+            preview, video = render_run(out_dir, fps=1.0 / scene.frame_time, device=device,
+                                        progress=not args.no_progress)
+            print(f"Rendered {preview} and {video}")
     return 0
 
 
@@ -181,11 +213,19 @@ def _scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with pscc's error form: one line on stderr, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_INPUT_ERROR, f"pscc: error: {self.prog}: {' '.join(message.split())}. "
+                                    f"Fix: see `{self.prog} --help`\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``pscc`` command."""
     from pscc.collision.detector import METHODS
 
-    parser = argparse.ArgumentParser(prog="pscc", description="PSCC collision detection on NVIDIA Warp.")
+    parser = _Parser(prog="pscc", description="PSCC collision detection on NVIDIA Warp.")
     sub = parser.add_subparsers(dest="command", required=True)
 
     detect = sub.add_parser("detect", help="find colliding vertex-face and edge-edge pairs of a mesh")
@@ -235,15 +275,91 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the ``pscc`` command; return its exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+_warp_messages = ""
+"""What Warp printed on stderr while it initialised (shown only when a CUDA device is asked for)."""
+
+
+def _init_warp() -> None:
+    """Initialise Warp quietly: its native start-up warnings (no CUDA driver) are kept, not printed."""
+    global _warp_messages
+    import tempfile
+
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as capture:
+        os.dup2(capture.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        capture.seek(0)
+        _warp_messages = capture.read().decode(errors="replace").strip()
+
+
+def _cuda_available() -> bool:
+    import warp as wp
+
+    return bool(wp.is_cuda_available())
+
+
+def _device(name: str | None) -> str:
+    """The Warp device ``--device`` names (``None``: Warp's default), as its alias.
+
+    Raises:
+        InputError: no such device here (the message lists the devices there are).
+    """
+    import warp as wp
+
     try:
+        device = wp.get_device(name)
+    except (RuntimeError, ValueError):
+        names = ", ".join(d.alias for d in wp.get_devices())
+        why = f" ({' '.join(_warp_messages.split())})" if _warp_messages and str(name).startswith("cuda") else ""
+        raise InputError("argument", "--device", f"{name!r} is not available on this machine{why}",
+                         f"use one of: {names}") from None
+    if device.is_cuda and _warp_messages:
+        print(_warp_messages, file=sys.stderr)
+    return str(device.alias)
+
+
+def _one_line(error: BaseException) -> str:
+    """The error's message and notes on one line, as sentences."""
+    parts = [" ".join(part.split()) for part in (str(error) or type(error).__name__,
+                                                   *getattr(error, "__notes__", []))]
+    return " ".join(part if part.endswith((".", "!", "?")) or k == len(parts) - 1 else part + "."
+                    for k, part in enumerate(parts) if part)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``pscc`` command; return its exit status (see the module docstring)."""
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        _init_warp()
         return int(args.run(args))
+    except KeyboardInterrupt as error:
+        notes = " ".join(" ".join(note.split()) for note in getattr(error, "__notes__", []))
+        print(f"pscc: interrupted{'. ' + notes if notes else ''}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except PsccError as error:
-        print(f"pscc: error: {error}", file=sys.stderr)
+        print(f"pscc: error: {_one_line(error)}", file=sys.stderr)
         return EXIT_INPUT_ERROR
+    except MemoryError as error:
+        print(f"pscc: error: not enough memory ({_one_line(error)}). Fix: use a smaller scene or a machine with "
+              "more memory", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except OSError as error:
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"pscc: error: {where}{error.strerror or _one_line(error)}. Fix: check the path, its permissions "
+              "and the free disk space", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except Exception as error:
+        if os.environ.get("PSCC_TRACEBACK"):
+            raise
+        print(f"pscc: internal error: {type(error).__name__}: {_one_line(error)} (a bug in pscc; run again with "
+              "PSCC_TRACEBACK=1 for the traceback and report it)", file=sys.stderr)
+        return EXIT_INTERNAL_ERROR

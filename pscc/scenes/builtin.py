@@ -22,6 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
 from pscc.mesh.generate import grid_sheet, icosphere
 from pscc.sim.obstacles import Handle, KeyframedMotion, Obstacle, Transform
@@ -141,4 +142,6 @@ def build_scene(name: str, triangles: int | None = None) -> Scene:
     if isinstance(triangles, bool) or not isinstance(triangles, int | np.integer) or triangles < MIN_TRIANGLES:
         raise InputError("argument", "triangles", f"{triangles!r} is not an integer >= {MIN_TRIANGLES}",
                          f"pass --triangles {MIN_TRIANGLES} or more")
+    check_fits(int(triangles) * SIMULATION_BYTES_PER_TRIANGLE, what=f"a {name} scene of {int(triangles):,} triangles",
+               source="argument", field="--triangles", fix="pass fewer --triangles")
     return SCENES[name](int(triangles))

@@ -11,11 +11,15 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
 from pscc.scenes import builtin, paper
 from pscc.scenes.builtin_file import builtin_scene_toml, load_builtin_file
@@ -57,6 +61,10 @@ def build(name: str, *, triangles: int | None = None, scale: float | None = None
                 raise InputError("argument", "--triangles", f"{triangles!r} is not an integer", "pass an integer")
             scale = triangles / paper.PAPER_TRIANGLES[name]
         value = paper.min_scale(name) if scale is None else paper.check_scale(name, scale)
+        count = round(value * paper.PAPER_TRIANGLES[name])
+        check_fits(count * SIMULATION_BYTES_PER_TRIANGLE, what=f"the {name} scene at scale {value:g} (about "
+                   f"{count:,} triangles)", source="argument", field="--scale" if triangles is None else "--triangles",
+                   fix="pass a smaller --scale or fewer --triangles")
         return paper.PAPER_SCENES[name](value)
     if scale is not None:
         try:
@@ -96,6 +104,61 @@ class SceneSource:
             return resolved_scene_toml(self.detail, frames=frames, contact=contact)
         name, size = self.detail
         return builtin_scene_toml(name, size, frames, self.scene, contact)
+
+    def run_identity(self, contact: ContactConfig) -> dict[str, Any]:
+        """What makes two runs of this scene the same run (``run.json``; ``--resume`` compares it).
+
+        That is :attr:`identity`, every key of the resolved scene file but the frame count (so a
+        resumed run may go on for more frames) by key path, the SHA-256 of every file the scene
+        reads (meshes, sequences) and a SHA-256 of the built scene's arrays
+        (:func:`pscc.sim.simulation.scene_identity`), which also catches changes no key shows.
+        """
+        from pscc.sim.simulation import scene_identity
+
+        settings = _flatten_settings(tomllib.loads(self.resolved_toml(1, contact)))
+        for key in FRAME_COUNT_KEYS:
+            settings.pop(key, None)
+        files = {}
+        for value in settings.values():
+            for item in value if isinstance(value, list) else [value]:
+                if isinstance(item, str) and os.path.isabs(item) and os.path.isfile(item) and item not in files:
+                    files[item] = _file_sha256(Path(item))
+        for key, value in settings.items():
+            text = json.dumps(value)
+            if len(text) > LONG_SETTING:  # long lists (pins, sequences): their hash
+                settings[key] = "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+        return {**self.identity, "method": contact.method, "settings": settings, "files": files,
+                "scene_sha256": scene_identity(self.scene, contact)["scene_sha256"]}
+
+
+FRAME_COUNT_KEYS: tuple[str, ...] = ("builtin.frames", "scene.frames")
+"""Keys of a resolved scene file left out of a run's identity (a resumed run may run longer)."""
+
+LONG_SETTING = 200
+"""Settings whose JSON is longer than this many characters are kept in ``run.json`` as a SHA-256."""
+
+
+def _flatten_settings(value: Any, prefix: str = "") -> dict[str, Any]:
+    """Scene-file keys as key paths: ``cloth[0].material.density`` -> value (arrays of tables indexed)."""
+    if isinstance(value, dict):
+        flat: dict[str, Any] = {}
+        for key, item in value.items():
+            flat.update(_flatten_settings(item, f"{prefix}.{key}" if prefix else str(key)))
+        return flat
+    if isinstance(value, list) and value and all(isinstance(item, dict) for item in value):
+        flat = {}
+        for index, item in enumerate(value):
+            flat.update(_flatten_settings(item, f"{prefix}[{index}]"))
+        return flat
+    return {prefix: value}
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def open_scene(spec: str, *, triangles: int | None = None, scale: float | None = None) -> SceneSource:

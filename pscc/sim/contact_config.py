@@ -43,7 +43,9 @@ class ContactConfig:
     """Run the independent intersection check (:class:`pscc.collision.intersection.IntersectionCheck`)
     on every step's end state and reject the step when it finds a crossing."""
     allow_initial_intersections: bool = False
-    """Start even when the initial state already intersects (otherwise an error names the pairs)."""
+    """Start even when the initial state already intersects (otherwise an error names the pairs). This skips
+    the refusal and nothing else: the response keeps crossing features from crossing further but cannot
+    pull them apart, so crossing surfaces that move usually make the first steps fail (docs/simulator.md)."""
 
     def validate(self) -> ContactConfig:
         """Check every field; return ``self``.

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
-import json
+import hashlib
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from pscc.errors import InputError
 from pscc.io.formats import FrameWriter, parse_formats
 from pscc.io.frames import write_frame, write_json_atomic
+from pscc.io.run_folder import CHECKPOINT_FILE, RunFolder
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.scene import Scene
 from pscc.sim.solver import ClothSolver
@@ -32,6 +35,7 @@ class Simulation:
         self._next = self.solver.initial_state()
         self.frame = 0
         self.frame_stats: list[dict[str, Any]] = []
+        self._last_checkpoint = 0
 
     @property
     def time(self) -> float:
@@ -73,79 +77,148 @@ class Simulation:
         """Solver state plus the frame counter (see :meth:`ClothSolver.state_dict`)."""
         return self.solver.state_dict(self.state)
 
-    def run(self, frames: int, out_dir: Path, progress: bool = True, *, identity: dict[str, Any] | None = None,
-            resume: bool = False, overwrite: bool = False, checkpoint_every: int = 10,
-            formats: tuple[str, ...] = ("npz",),
+    def run(self, frames: int, out_dir: Path | str | RunFolder, progress: bool = True, *,
+            identity: dict[str, Any] | None = None, resume: bool = False, overwrite: bool = False,
+            checkpoint_every: int = 10, formats: tuple[str, ...] = ("npz",),
             before_first_frame: Callable[[], None] | None = None) -> dict[str, Any]:
         """Simulate up to frame ``frames``, writing frame files, checkpoints and ``stats.json``.
 
         A new run writes frame 0 (the initial state) and frames 1..``frames``. With ``resume`` the
         run continues from the folder's last checkpoint (frames after it are written again, equal
         on the CPU to those an uninterrupted run writes). See :class:`pscc.io.run_folder.RunFolder`
-        for the folder rules.
+        for the folder rules: one process at a time, a manifest of every file written, and an
+        identity that ``resume`` must match.
+
+        When the run stops with an error (or Ctrl-C) before its first simulated frame, everything
+        it wrote is removed again. Later, the folder keeps the frames written so far, ``run.json``
+        and ``stats.json`` say ``failed`` (or ``interrupted``) with the error, and the exception
+        carries a note saying what was kept and how to continue.
 
         Args:
             frames: last frame to write.
-            out_dir: output folder.
+            out_dir: output folder, or a :class:`RunFolder` the caller has opened (``identity``,
+                ``resume`` and ``overwrite`` are then the folder's).
             progress: show a progress bar with ETA and live counts.
-            identity: what makes two runs the same run (default: scene name and sizes).
+            identity: what makes two runs the same run (default :func:`scene_identity`).
             resume: continue the run in ``out_dir`` from its checkpoint.
             overwrite: replace another run's output in ``out_dir``.
             checkpoint_every: frames between checkpoints (>= 1).
             formats: output formats (:data:`pscc.io.formats.FORMATS`); NPZ frames are always written
                 (checkpoints and ``--resume`` rely on them).
             before_first_frame: called once the folder is claimed, before anything else is written
-                (``pscc simulate`` writes ``scene.toml`` there).
+                (``pscc simulate`` writes ``scene.toml`` there; record what it writes with
+                :meth:`RunFolder.record`).
 
         Returns:
             The stats written to ``out_dir/stats.json``.
 
         Raises:
-            InputError: the folder rules refuse ``out_dir``, or ``checkpoint_every`` < 1.
+            InputError: the folder rules refuse ``out_dir``, the checkpoint is damaged or past
+                ``frames``, frame files of a resumed run are missing, or ``checkpoint_every`` < 1.
+            OutputError: a file cannot be written (full disk, no permission).
         """
-        from pscc.io.run_folder import RunFolder
-
-        if checkpoint_every < 1:
-            raise InputError("argument", "--checkpoint-every", f"{checkpoint_every} is below 1", "pass 1 or more")
-        if identity is None:
-            identity = {"scene": self.scene.name, "cloth_triangles": int(self.scene.faces.shape[0])}
-        folder = RunFolder(Path(out_dir), identity)
-        folder.prepare(resume=resume, overwrite=overwrite)
-        out_dir = Path(out_dir)
+        if isinstance(checkpoint_every, bool) or not isinstance(checkpoint_every, int) or checkpoint_every < 1:
+            raise InputError("argument", "--checkpoint-every", f"{checkpoint_every!r} is not an integer >= 1",
+                             "pass 1 or more")
+        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+            raise InputError("argument", "--frames", f"{frames!r} is not an integer >= 1", "pass --frames 1 or more")
         formats = tuple(dict.fromkeys(("npz", *parse_formats(formats))))
-        if before_first_frame is not None:
-            before_first_frame()
+        if isinstance(out_dir, RunFolder):
+            return self._run(out_dir, frames, progress, checkpoint_every, formats, before_first_frame)
+        folder = RunFolder(Path(out_dir), identity if identity is not None else scene_identity(self.scene,
+                                                                                             self.solver.contact))
+        with folder.open(resume=resume, overwrite=overwrite):
+            return self._run(folder, frames, progress, checkpoint_every, formats, before_first_frame)
+
+    def _run(self, folder: RunFolder, frames: int, progress: bool, checkpoint_every: int, formats: tuple[str, ...],
+             before_first_frame: Callable[[], None] | None) -> dict[str, Any]:
+        out_dir = folder.out_dir
+        resume = folder.resuming
+        start = 0
         if resume:
-            state, frame, frame_stats = folder.load_checkpoint()
+            state, start, frame_stats = folder.load_checkpoint()
+            if start > frames:
+                raise InputError("argument", "--frames", f"{frames} is below the run's checkpoint at frame {start}",
+                                 f"pass --frames {start} or more to continue the run")
+            missing = folder.missing_frames(start)
+            if missing:
+                raise InputError(str(out_dir / missing[0]), "frames", f"{len(missing)} frame file(s) of the run up "
+                                 f"to its checkpoint at frame {start} are missing",
+                                 "restore them, or start the run over with --overwrite")
             self.solver.load_state_dict(state, self.state)
-            self.frame = frame
-            self.frame_stats = frame_stats
-            writer = self._frame_writer(out_dir, formats, frame + 1)
-        else:
-            writer = self._frame_writer(out_dir, formats, None)
-            self._write_current(writer)
-            folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
+            self.frame, self.frame_stats = start, frame_stats
+        folder.claim()
+        self._last_checkpoint = start
+        try:
+            for pattern in _series_patterns(formats):
+                folder.record_series(pattern, frames)
+            folder.record(*(["animation.usd"] if "usd" in formats else []), CHECKPOINT_FILE, "stats.json")
+            if before_first_frame is not None:
+                before_first_frame()
+            writer = self._frame_writer(out_dir, formats, start + 1 if resume else None)
+            try:
+                if not resume:
+                    self._write_current(writer)
+                    folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
+                self._simulate(folder, writer, frames, progress, checkpoint_every)
+            finally:
+                writer.close()
+        except BaseException as error:
+            self._stopped(folder, error)
+            raise
+        stats = self.summary()
+        write_json_atomic(out_dir / "stats.json", {**stats, "status": "done"})
+        folder.set_status("done", frame=self.frame)
+        return stats
+
+    def _simulate(self, folder: RunFolder, writer: FrameWriter, frames: int, progress: bool,
+                  checkpoint_every: int) -> None:
         bar = None
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=frames, initial=min(self.frame, frames), unit="frame", desc=self.scene.name,
                        dynamic_ncols=True)
-        while self.frame < frames:
-            record = self.step_frame()
-            self._write_current(writer)
-            if self.frame % checkpoint_every == 0 or self.frame == frames:
-                folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
+        try:
+            while self.frame < frames:
+                record = self.step_frame()
+                self._write_current(writer)
+                if self.frame % checkpoint_every == 0 or self.frame == frames:
+                    folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
+                    self._last_checkpoint = self.frame
+                if bar is not None:
+                    bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
+                                    halvings=record["counts"]["halvings"], refresh=False)
+                    bar.update(1)
+        finally:
             if bar is not None:
-                bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
-                                halvings=record["counts"]["halvings"], refresh=False)
-                bar.update(1)
-        writer.close()
-        if bar is not None:
-            bar.close()
-        stats = self.summary()
-        write_json_atomic(out_dir / "stats.json", stats)
-        return stats
+                bar.close()
+
+    def _stopped(self, folder: RunFolder, error: BaseException) -> None:
+        """Leave the folder in a clear state after ``error`` stopped the run (see :meth:`run`)."""
+        out_dir = folder.out_dir
+        if not folder.resuming and self.frame == 0:
+            try:
+                folder.discard()
+            except Exception:  # the original error matters more than a failed clean-up
+                pass
+            else:
+                error.add_note(f"nothing was kept in {out_dir}")
+            return
+        status = "interrupted" if isinstance(error, KeyboardInterrupt) else "failed"
+        message = str(error) or type(error).__name__
+        checkpoint = self._last_checkpoint
+        try:
+            write_json_atomic(out_dir / "stats.json", {**self.summary(), "status": status, "error": message})
+            folder.set_status(status, error=message, frame=self.frame, checkpoint=checkpoint)
+        except Exception:
+            pass
+        if status == "interrupted":
+            error.add_note(f"{out_dir} keeps frames 0-{self.frame}; pass --resume to continue from its checkpoint "
+                           f"at frame {checkpoint}")
+        else:
+            error.add_note(f"{out_dir} keeps frames 0-{self.frame} of the failed run (run.json says why); "
+                           "pass --overwrite to start it again")
 
     def summary(self) -> dict[str, Any]:
         """Scene, device, sizes and the per-frame stats."""
@@ -179,6 +252,36 @@ def _sum_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
     return {"steps": len(steps), "seconds": seconds, "counts": counts}
 
 
-def load_stats(path: Path) -> dict[str, Any]:
-    """Read a ``stats.json``."""
-    return json.loads(Path(path).read_text())
+def _series_patterns(formats: tuple[str, ...]) -> list[str]:
+    """Manifest patterns of the per-frame files of ``formats`` (USD is one file)."""
+    folders = {"npz": "frames", "obj": "obj", "ply": "ply"}
+    return [f"{folders[name]}/frame_{{index:05d}}.{name}" for name in formats if name in folders]
+
+
+def scene_identity(scene: Scene, contact: ContactConfig) -> dict[str, Any]:
+    """The default identity of a run of ``scene``: its name, size and a SHA-256 of everything it is made of.
+
+    The hash covers the cloth arrays (positions, faces, rest shape, object ids), the materials, the
+    solver and contact settings, the handles' vertices and positions and the obstacles' faces and
+    positions at t = 0 and t = 1 s.
+    """
+    digest = hashlib.sha256()
+
+    def add(*values: Any) -> None:
+        for value in values:
+            if isinstance(value, np.ndarray):
+                value = np.ascontiguousarray(value)
+                digest.update(f"{value.dtype.str}{value.shape}".encode())
+                digest.update(value.tobytes())
+            else:
+                digest.update(repr(value).encode())
+
+    add(np.asarray(scene.vertices, np.float32), np.asarray(scene.faces, np.int32), np.asarray(scene.rest, np.float32),
+        np.asarray(scene.object_ids, np.int32), scene.material, scene.solver, contact, scene.frame_time,
+        scene.steps_per_frame)
+    for handle in scene.handles:
+        add(np.asarray(handle.vertices), *(np.asarray(handle.transform(t)[k]) for t in (0.0, 1.0) for k in (0, 1)))
+    for obstacle in scene.obstacles:
+        add(np.asarray(obstacle.faces), *(np.asarray(obstacle.positions(t), np.float32) for t in (0.0, 1.0)))
+    return {"scene": scene.name, "cloth_triangles": int(scene.faces.shape[0]), "method": contact.method,
+            "scene_sha256": digest.hexdigest()}

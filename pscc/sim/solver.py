@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from pscc._checks import check_coordinate_range, check_object_ids, unused_object_ids
+from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
@@ -46,12 +48,18 @@ from pscc.sim.obstacles import step_map
 from pscc.sim.proximity import ProximityContacts
 from pscc.sim.scene import Scene
 from pscc.sim.state import ClothState
+from pscc.tolerances import MAX_COORDINATE
 
 wp.set_module_options({"enable_backward": False})
 
 
 class SimulationError(PsccError):
     """A step could not be completed free of intersections even after the allowed step halvings."""
+
+
+def _finite_in_range(positions: np.ndarray) -> bool:
+    """Whether every coordinate is finite and within :data:`pscc.tolerances.MAX_COORDINATE` (the detector's range)."""
+    return bool(np.all(np.isfinite(positions))) and float(np.abs(positions).max(initial=0.0)) <= MAX_COORDINATE
 
 
 class _StepRejected(Exception):
@@ -107,6 +115,11 @@ class ClothSolver:
         cloth_count = int(scene.vertices.shape[0])
         self.cloth_vertex_count = cloth_count
 
+        triangles = int(scene.faces.shape[0]) + sum(int(o.faces.shape[0]) for o in scene.obstacles)
+        check_fits(triangles * SIMULATION_BYTES_PER_TRIANGLE, what=f"simulating {triangles:,} triangles",
+                   source=scene.name, field="faces", fix="simulate a coarser mesh or use a device with more memory",
+                   device=str(self.device))
+
         # Index space: cloth vertices, then the vertices of each obstacle.
         obstacle_positions = [o.positions(0.0) for o in scene.obstacles]
         offsets = np.cumsum([cloth_count] + [p.shape[0] for p in obstacle_positions])
@@ -126,10 +139,15 @@ class ClothSolver:
         all_handles = np.concatenate(handle_ids + obstacle_ids) if handle_ids or obstacle_ids else None
         if all_handles is not None and np.unique(all_handles).size != all_handles.size:
             raise InputError(scene.name, "handles", "a vertex belongs to two handles", "list each vertex in one handle")
-        self.model = ClothModel(vertices, scene.faces, rest=rest_all,
-                                materials=materials if per_object else materials[0],
-                                object_ids=scene.object_ids if per_object else None,
-                                handles=all_handles, device=self.device)
+        try:
+            self.model = ClothModel(vertices, scene.faces, rest=rest_all,
+                                    materials=materials if per_object else materials[0],
+                                    object_ids=scene.object_ids if per_object else None,
+                                    handles=all_handles, device=self.device)
+        except InputError as error:
+            if error.source != "argument":
+                raise
+            raise InputError(scene.name, error.field, error.problem, error.fix) from None
         self.integrator = ImplicitEuler(self.model, scene.solver, self.device)
         n = self.model.vertex_count
 
@@ -145,16 +163,16 @@ class ClothSolver:
         self._kinematic = ~free
 
         # Collision mesh: cloth faces, then obstacle faces; one object per cloth piece and per obstacle.
-        cloth_objects = np.asarray(scene.object_ids, dtype=np.int32)
-        first_obstacle = int(cloth_objects.max()) + 1 if cloth_objects.size else 0
+        cloth_objects = check_object_ids(scene.object_ids, int(scene.faces.shape[0]), source=scene.name)
+        obstacle_objects = unused_object_ids(cloth_objects, len(scene.obstacles))
         faces = [np.asarray(scene.faces, np.int32)]
         objects = [cloth_objects]
         for k, obstacle in enumerate(scene.obstacles):
             faces.append(obstacle.faces + offsets[k])
-            objects.append(np.full(obstacle.faces.shape[0], first_obstacle + k, dtype=np.int32))
+            objects.append(np.full(obstacle.faces.shape[0], obstacle_objects[k], dtype=np.int32))
         self.collision_faces = np.concatenate(faces).astype(np.int32)
         collision_objects = np.concatenate(objects)
-        rigid = range(first_obstacle, first_obstacle + len(scene.obstacles))
+        rigid = [int(v) for v in obstacle_objects]
         self.detector = CollisionDetector(self.collision_faces, method=self.contact.method,
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
                                           device=str(self.device))
@@ -171,15 +189,19 @@ class ClothSolver:
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
 
+        check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
         initial = self._cloth_crossings(vertices)
+        self.initial_crossings = int(initial.shape[0])
+        """Edge-face crossings of the initial state (non-zero only with ``allow_initial_intersections``)."""
         if initial.shape[0] and not self.contact.allow_initial_intersections:
             edge, face = (int(v) for v in initial[0][:2])
             raise InputError(scene.name, "vertices",
                              f"the initial state intersects itself: {initial.shape[0]} edge-face crossings "
                              f"(first: edge {edge} through face {face})",
-                             "separate the surfaces, or set ContactConfig(allow_initial_intersections=True) "
-                             "to proceed anyway")
+                             "separate the surfaces in the input; to start anyway set allow_initial_intersections "
+                             "= true under [contact] in the scene file (ContactConfig(allow_initial_intersections"
+                             "=True) in Python), which lets crossing surfaces start but cannot pull them apart")
 
     # ------------------------------------------------------------------ public
 
@@ -304,8 +326,17 @@ class ClothSolver:
             self._attempt(state_in, state_out, t, dt, stats)
         except _StepRejected as why:
             if depth >= self.contact.max_step_halvings:
+                if self.initial_crossings:
+                    fix = (f"the initial state has {self.initial_crossings} edge-face crossings, let through by "
+                           "allow_initial_intersections = true; the collision response stops surfaces from "
+                           "crossing further but cannot pull crossing ones apart, and their contacts make steps "
+                           "fail like this. Fix: separate the surfaces in the input")
+                else:
+                    fix = ("Fix: use a smaller time step (more steps_per_frame), allow more max_step_halvings or "
+                           "max_response_rounds under [contact], or check the scene for surfaces squeezed "
+                           "between moving obstacles")
                 raise SimulationError(f"step at t={t:.6g} s could not be made intersection-free after "
-                                      f"{depth} halvings (dt={dt:.3g} s): {why}") from None
+                                      f"{depth} halvings (dt={dt:.3g} s): {why}; {fix}") from None
             stats["counts"]["halvings"] += 1
             middle = self._scratch.get(depth)
             if middle is None:
@@ -352,8 +383,8 @@ class ClothSolver:
         seconds["integration"] += time.perf_counter() - mark
         x0 = state_in.positions.numpy()
         x1 = state_out.positions.numpy()
-        if not np.all(np.isfinite(x1)):
-            raise _StepRejected("the integrator produced NaN or Inf")
+        if not _finite_in_range(x1):
+            raise _StepRejected("the integrator produced NaN, Inf or coordinates beyond MAX_COORDINATE")
 
         mark = time.perf_counter()
         broad = self.detector.broad_phase(x0, x1, self.thickness)
@@ -410,8 +441,8 @@ class ClothSolver:
                 except ImpactZoneFailure as failure:
                     raise _StepRejected(str(failure)) from None
             seconds["penetration"] += time.perf_counter() - mark
-            if not np.all(np.isfinite(x1)):
-                raise _StepRejected("the penetration response produced NaN or Inf")
+            if not _finite_in_range(x1):
+                raise _StepRejected("the penetration response produced NaN, Inf or coordinates beyond MAX_COORDINATE")
 
         if self.contact.check_intersections:
             mark = time.perf_counter()

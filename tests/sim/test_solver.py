@@ -312,3 +312,26 @@ def test_ccd_rechecks_in_the_response_loop_equal_full_ccd() -> None:
 def _rows(result) -> tuple[list, list, list, list]:
     return (result.vertex_face.tolist(), result.edge_edge.tolist(), result.vertex_face_toi.tolist(),
             result.edge_edge_toi.tolist())
+
+
+def test_the_largest_object_id_steps_like_a_small_one() -> None:
+    """Cloth ids need not be small: obstacles get free ids (never max + 1 past int32) and the run is the same."""
+    scene = build_scene("drape", 200)
+    big = dataclasses.replace(scene, object_ids=np.full_like(scene.object_ids, 2**31 - 1))
+    positions = []
+    for candidate in (scene, big):
+        solver = ClothSolver(candidate, device="cpu")
+        assert len(set(solver.detector._object_ids_np.tolist())) == 1 + len(candidate.obstacles)
+        state, following = solver.initial_state(), solver.initial_state()
+        for _ in range(3):
+            solver.step(state, following, candidate.time_step)
+            state, following = following, state
+        positions.append(state.positions.numpy().copy())
+    np.testing.assert_array_equal(positions[0], positions[1])
+
+
+def test_object_ids_that_do_not_fit_int32_are_refused_naming_the_scene() -> None:
+    scene = build_scene("drape", 200)
+    bad = dataclasses.replace(scene, object_ids=np.full(scene.faces.shape[0], 2**31, dtype=np.int64))
+    with pytest.raises(InputError, match=f"{scene.name}: object_ids: .*outside"):
+        ClothSolver(bad, device="cpu")
