@@ -63,11 +63,11 @@ _FIXES = {
 }
 
 
-def output_error(path: Path | str, error: OSError, field: str = "path") -> OutputError:
-    """An :class:`OutputError` for ``error`` raised while writing ``path`` (problem and fix by errno)."""
+def output_error(path: Path | str, error: OSError, field: str = "path", action: str = "written") -> OutputError:
+    """An :class:`OutputError` for ``error`` raised while writing (or removing: ``action``) ``path``."""
     problem, fix = _FIXES.get(error.errno or 0, (None, "check the output path and the disk"))
     detail = error.strerror or str(error)
-    problem = f"cannot be written: {problem} ({detail})" if problem else f"cannot be written ({detail})"
+    problem = f"cannot be {action}: {problem} ({detail})" if problem else f"cannot be {action} ({detail})"
     return OutputError(str(path), field, problem, fix)
 
 

@@ -9,6 +9,7 @@ The CLI only parses arguments, calls the public API and prints. Exit statuses:
       not enough memory): one line on stderr naming the file, the field and the fix; nothing
       is left half-written
 130   interrupted (Ctrl-C): one line; a simulation keeps its last checkpoint for ``--resume``
+143   terminated (SIGTERM): as for Ctrl-C
 ====  =====================================================================================
 """
 
@@ -17,7 +18,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import warnings
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -36,8 +39,18 @@ EXIT_INPUT_ERROR = 2
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT)."""
 
+EXIT_TERMINATED = 143
+"""Exit status after SIGTERM (128 + SIGTERM)."""
+
 RENDER_FILES: tuple[str, ...] = ("preview.png", "animation.mp4")
 """Files ``--render`` adds to a run folder."""
+
+
+def _out_dir(text: str) -> Path:
+    """``--out-dir`` as a path; an empty name (which would mean the current folder) is refused."""
+    if not text.strip():
+        raise InputError(repr(text), "--out-dir", "is empty", "name a folder for the run, e.g. --out-dir runs/drape")
+    return Path(text)
 
 
 def _check_output_file(out: Path, inputs: list[str]) -> None:
@@ -52,7 +65,8 @@ def _check_output_file(out: Path, inputs: list[str]) -> None:
         raise InputError(str(out), "--out", "is a folder", "name a file, e.g. pairs.npz")
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
-        raise InputError(str(out), "--out", f"folder {folder} does not exist", "create it or pick another path")
+        problem = f"{folder} is not a folder" if folder.exists() else f"folder {folder} does not exist"
+        raise InputError(str(out), "--out", problem, "create the folder or pick another path")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputError(str(out), "--out", f"folder {folder} is not writable", "pick a writable folder")
 
@@ -123,7 +137,7 @@ def _demo(args: argparse.Namespace) -> int:
     if args.frames < 1:
         raise InputError("argument", "--frames", f"{args.frames} is below 1", "pass --frames 1 or more")
     scene = build_scene(args.scene, triangles)
-    out_dir = Path(args.out_dir)
+    out_dir = _out_dir(args.out_dir)
     print(f"pscc demo on {device}: scene '{scene.name}' ({scene.description}), "
           f"{scene.faces.shape[0]:,} cloth triangles, {args.frames} frames at {1.0 / scene.frame_time:g} fps")
     simulation = Simulation(scene, device=device)
@@ -166,7 +180,7 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.method is not None:
         contact = ContactConfig(**{**contact.__dict__, "method": args.method})
     contact.validate()
-    out_dir = Path(args.out_dir)
+    out_dir = _out_dir(args.out_dir)
     resolved = source.resolved_toml(frames, contact)
     with RunFolder(out_dir, source.run_identity(contact)).open(resume=args.resume, overwrite=args.overwrite) as folder:
         described = f"{scene.name}: {scene.description}" if scene.description else scene.name
@@ -336,15 +350,20 @@ def _one_line(error: BaseException) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the ``pscc`` command; return its exit status (see the module docstring)."""
+    previous_handler = _handle_sigterm()
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        _init_warp()
-        return int(args.run(args))
+        with warnings.catch_warnings():
+            # NumPy's overflow warnings would print lines before ours; the checks report the problem.
+            warnings.simplefilter("ignore", RuntimeWarning)
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            _init_warp()
+            return int(args.run(args))
     except KeyboardInterrupt as error:
         notes = " ".join(" ".join(note.split()) for note in getattr(error, "__notes__", []))
-        print(f"pscc: interrupted{'. ' + notes if notes else ''}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        word = "terminated" if isinstance(error, Terminated) else "interrupted"
+        print(f"pscc: {word}{'. ' + notes if notes else ''}", file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(error, Terminated) else EXIT_INTERRUPTED
     except PsccError as error:
         print(f"pscc: error: {_one_line(error)}", file=sys.stderr)
         return EXIT_INPUT_ERROR
@@ -353,9 +372,10 @@ def main(argv: list[str] | None = None) -> int:
               "more memory", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except OSError as error:
-        where = f"{error.filename}: " if error.filename else ""
-        print(f"pscc: error: {where}{error.strerror or _one_line(error)}. Fix: check the path, its permissions "
-              "and the free disk space", file=sys.stderr)
+        where = f"{error.filename}: file" if error.filename else "argument: path"
+        notes = " ".join(" ".join(note.split()) for note in getattr(error, "__notes__", []))
+        print(f"pscc: error: {where}: {error.strerror or str(error)}. Fix: check the path, its permissions "
+              f"and the free disk space{'. ' + notes if notes else ''}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except Exception as error:
         if os.environ.get("PSCC_TRACEBACK"):
@@ -363,3 +383,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pscc: internal error: {type(error).__name__}: {_one_line(error)} (a bug in pscc; run again with "
               "PSCC_TRACEBACK=1 for the traceback and report it)", file=sys.stderr)
         return EXIT_INTERNAL_ERROR
+    finally:
+        if previous_handler is not None:
+            signal.signal(signal.SIGTERM, previous_handler)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C: the run stops cleanly and keeps its last checkpoint."""
+
+
+def _handle_sigterm() -> Any:
+    """Turn SIGTERM into :class:`Terminated` (main thread only); return the previous handler or ``None``."""
+    def terminate(signum: int, frame: Any) -> None:
+        raise Terminated
+
+    try:
+        return signal.signal(signal.SIGTERM, terminate)
+    except ValueError:  # not the main thread
+        return None

@@ -408,3 +408,176 @@ def test_built_in_sizes_too_large_for_memory_are_refused(tmp_path: Path, capsys,
     assert main([*command, "--out-dir", str(tmp_path / "out"), "--no-progress"]) == 2
     _one_error_line(capsys, "--triangles", "GiB of memory")
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------ found by a second round of bad input
+
+
+def _finished_run(out: Path, frames: int = 2) -> list[str]:
+    assert main(["simulate", "twist", "--frames", str(frames), *SMALL, "--out-dir", str(out)]) == 0
+    return _files(out)
+
+
+def test_a_manifest_with_a_huge_frame_range_is_overwritten_quickly(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "r"
+    _finished_run(out)
+    for last in (10**9, 10**14):  # the largest valid range, and one past it (a damaged manifest)
+        manifest = json.loads((out / "manifest.json").read_text())
+        manifest["series"]["frames/frame_{index:05d}.npz"] = [0, last]
+        (out / "manifest.json").write_text(json.dumps(manifest))
+        started = time.monotonic()
+        assert main(["simulate", "twist", "--frames", "1", *SMALL, "--out-dir", str(out), "--overwrite"]) == 0
+        assert time.monotonic() - started < 60
+        assert not (out / ".pscc.lock").exists()
+
+
+def test_overwrite_never_follows_a_linked_sub_folder_out_of_the_run(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "r"
+    _finished_run(out)
+    victims = tmp_path / "victims"
+    victims.mkdir()
+    for name in ("frame_00000.npz", "frame_00001.npz"):
+        (victims / name).write_text("precious")
+    for path in (out / "frames").iterdir():
+        path.unlink()
+    (out / "frames").rmdir()
+    (out / "frames").symlink_to(victims)
+    assert main(["simulate", "twist", "--frames", "1", *SMALL, "--out-dir", str(out), "--overwrite"]) == 2
+    _one_error_line(capsys, "frames", "is a link to", "outside the run folder")
+    assert [p.read_text() for p in sorted(victims.iterdir())] == ["precious", "precious"]
+
+
+def test_a_format_added_on_resume_is_filled_in_for_the_earlier_frames(tmp_path: Path) -> None:
+    out = tmp_path / "r"
+    _finished_run(out, frames=2)
+    assert main(["simulate", "twist", "--frames", "3", *SMALL, "--out-dir", str(out), "--resume", "--format",
+                 "npz,obj"]) == 0
+    assert [p.name for p in sorted((out / "obj").iterdir())] == [f"frame_{i:05d}.obj" for i in range(4)]
+    assert main(["simulate", "twist", "--frames", "4", *SMALL, "--out-dir", str(out), "--resume"]) == 0
+
+
+def test_a_checkpoint_of_another_run_is_refused(tmp_path: Path, capsys) -> None:
+    ours, theirs = tmp_path / "ours", tmp_path / "theirs"
+    _finished_run(ours)
+    assert main(["simulate", "twist", "--frames", "2", *SMALL, "--method", "spatial-hash", "--out-dir",
+                 str(theirs)]) == 0
+    (ours / "checkpoint.npz").write_bytes((theirs / "checkpoint.npz").read_bytes())
+    assert main(["simulate", "twist", "--frames", "3", *SMALL, "--out-dir", str(ours), "--resume"]) == 2
+    _one_error_line(capsys, "checkpoint.npz", "belongs to another run")
+
+
+def test_run_json_missing_beside_a_checkpoint_is_named(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "r"
+    _finished_run(out)
+    (out / "run.json").unlink()
+    assert main(["simulate", "twist", "--frames", "3", *SMALL, "--out-dir", str(out), "--resume"]) == 2
+    _one_error_line(capsys, "run.json", "no run.json")
+
+
+@pytest.mark.parametrize("folder", ["", " ", "/"])
+def test_an_empty_or_root_out_dir_is_refused(folder: str, capsys) -> None:
+    assert main(["simulate", "twist", "--frames", "1", *SMALL, "--out-dir", folder]) == 2
+    _one_error_line(capsys, "--out-dir")
+
+
+def test_an_overwrite_that_cannot_remove_a_file_leaves_the_old_run_whole(tmp_path: Path,
+                                                                         monkeypatch: pytest.MonkeyPatch,
+                                                                         capsys) -> None:
+    out = tmp_path / "r"
+    before = _finished_run(out)
+    contents = {name: (out / name).read_bytes() for name in before}
+    real_rename = os.rename
+
+    def rename(source: object, target: object) -> None:
+        if Path(source).name == "frame_00001.npz":
+            raise OSError(errno.EPERM, "Operation not permitted")
+        real_rename(source, target)
+
+    monkeypatch.setattr(os, "rename", rename)
+    assert main(["simulate", "twist", "--frames", "1", *SMALL, "--out-dir", str(out), "--overwrite"]) == 2
+    _one_error_line(capsys, "frame_00001.npz: --overwrite: cannot be removed: permission denied")
+    assert _files(out) == before
+    assert all((out / name).read_bytes() == data for name, data in contents.items())
+
+
+def test_a_full_disk_mid_run_reports_the_frames_really_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            capsys) -> None:
+    real_savez = np.savez
+    frames_written = {"n": 0}
+
+    def savez(stream: object, **arrays: object) -> None:
+        if "obstacle_faces" in arrays:  # a frame file
+            frames_written["n"] += 1
+            if frames_written["n"] == 3:  # frame 2: the disk is full
+                raise OSError(errno.ENOSPC, "No space left on device")
+        real_savez(stream, **arrays)
+
+    monkeypatch.setattr(np, "savez", savez)
+    out = tmp_path / "r"
+    assert main(["simulate", "twist", "--frames", "4", *SMALL, "--out-dir", str(out)]) == 2
+    _one_error_line(capsys, "frame_00002.npz: path: cannot be written: the disk is full", "keeps frames 0-1")
+    assert json.loads((out / "run.json").read_text())["frame"] == 1
+
+
+@pytest.mark.parametrize(("table", "key"), [
+    ("[scene]\nsteps_per_frame = 99999999999999999", "scene.steps_per_frame"),
+    ("[scene]\nframe_rate = 1e300", "scene.frame_rate"),
+    ("[solver]\ngravity = [0.0, 0.0, 1e30]", "solver.gravity"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\nrotate = [1e308, 1e308, 1e308]\n[cloth.sheet]\nsize = [0.3, 0.3]\n"
+     "cells = [4, 4]", "cloth[0].rotate[0]"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\ntranslate = [1e300, 0.0, 0.0]\n[cloth.sheet]\nsize = [0.3, 0.3]\n"
+     "cells = [4, 4]", "cloth[0].translate[0]"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [1e-300, 1e-300]\ncells = [4, 4]",
+     "cloth[0].sheet.size"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[cloth.material]\n"
+     "thickness = 1e10", "cloth[0].material.thickness"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[cloth.material]\n"
+     "bending = 1e300", "cloth[0].material.bending"),
+])
+def test_absurd_scene_numbers_are_refused_by_key_without_warnings(tmp_path: Path, capsys, table: str,
+                                                                  key: str) -> None:
+    scene = tmp_path / "scene.toml"
+    text = table if "[[cloth]]" in table else table + "\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]"
+    scene.write_text(text + "\n")
+    assert main(["simulate", str(scene), "--frames", "1", "--no-progress", "--out-dir", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"{scene}: {key}")
+    assert not (tmp_path / "o").exists()
+
+
+def test_sigterm_stops_the_run_like_ctrl_c(tmp_path: Path) -> None:
+    out = tmp_path / "r"
+    process = subprocess.Popen([sys.executable, "-m", "pscc", "simulate", "twist", "--frames", "40", *SMALL,
+                                "--checkpoint-every", "2", "--out-dir", str(out)], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 240
+    while not (out / "frames" / "frame_00004.npz").exists():
+        assert process.poll() is None, process.stderr.read()
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    process.terminate()
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 143 and err.startswith("pscc: terminated."), err
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    assert not (out / ".pscc.lock").exists()
+
+
+def test_size_options_name_the_option_the_user_gave(tmp_path: Path, capsys) -> None:
+    assert main(["simulate", "sphere", "--triangles", "100", "--out-dir", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "--triangles", "outside")
+    assert main(["simulate", "drape", "--scale", "1e-300", "--out-dir", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "--scale", "fewer than")
+
+
+def test_paths_that_are_not_files_say_what_they_are(mesh_file: Path, tmp_path: Path, capsys) -> None:
+    folder = tmp_path / "dir.toml"
+    folder.mkdir()
+    assert main(["simulate", str(folder), "--out-dir", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "is a folder")
+    loop = tmp_path / "loop.obj"
+    loop.symlink_to(loop)
+    assert main(["detect", str(loop)]) == 2
+    _one_error_line(capsys, "broken or looping link")
+    plain = tmp_path / "afile"
+    plain.write_text("x")
+    assert main(["detect", str(mesh_file), "--out", str(plain / "x.npz")]) == 2
+    _one_error_line(capsys, "is not a folder")

@@ -803,9 +803,10 @@ class FrameWriter:
         obstacle_faces: (l, 3) obstacle triangles, or ``None`` / empty when the scene has none.
         fps: frames per second (``1 / scene.frame_time``), used by USD.
         resume_from: first frame index of a resumed run (``None``: a new run). Per-frame files are
-            simply (over)written; the USD stage is re-opened (see :class:`UsdAnimationWriter`) and
-            any frame before ``resume_from`` it lacks (lost since its last save) is filled in from
-            the NPZ frame files on disk.
+            simply (over)written, and OBJ / PLY files of earlier frames that are missing (a format
+            added on resume) are written from the NPZ frames; the USD stage is re-opened (see
+            :class:`UsdAnimationWriter`) and any frame before ``resume_from`` it lacks (lost since its
+            last save) is filled in from the NPZ frame files on disk.
         usd_save_every: frames between saves of the USD stage.
 
     Raises:
@@ -829,6 +830,27 @@ class FrameWriter:
                                            resume_from=resume, save_every=usd_save_every)
             if resume_from is not None:
                 self._backfill_usd(int(resume_from))
+        if resume_from is not None:
+            self._backfill_files(int(resume_from))
+
+    def _backfill_files(self, resume_from: int) -> None:
+        """Write the OBJ / PLY files of frames ``0 .. resume_from - 1`` that are missing, from the NPZ frames
+        (a run resumed with a format it did not write before)."""
+        writers = {"obj": (obj_frame_path, write_obj_frame), "ply": (ply_frame_path, write_ply_frame)}
+        for name in self.formats:
+            if name not in writers:
+                continue
+            path_of, write = writers[name]
+            for index in range(resume_from):
+                if path_of(self.out_dir, index).is_file():
+                    continue
+                source = frame_path(self.out_dir, index)
+                if not source.is_file():
+                    raise InputError(str(source), "frames", f"is missing, so the {name} file of frame {index} "
+                                     "cannot be filled in", f"start a new run, or leave {name} out of --format")
+                frame = read_frame(source)
+                write(self.out_dir, index, frame["vertices"], self.faces, self.object_ids,
+                      frame["obstacle_vertices"], self.obstacle_faces)
 
     def _backfill_usd(self, resume_from: int) -> None:
         """Add frames ``0 .. resume_from - 1`` the USD stage lacks, from the NPZ frame files."""

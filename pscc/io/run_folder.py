@@ -34,6 +34,8 @@ import io
 import json
 import os
 import re
+import shutil
+import tempfile
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -61,8 +63,29 @@ _LEGACY_OUTPUTS: tuple[str, ...] = ("frames/frame_*.npz", "obj/frame_*.obj", "pl
 _SERIES = re.compile(r"^(?P<head>[^{}]*)\{index:0(?P<width>[1-9])d\}(?P<tail>[^{}]*)$")
 
 
+MAX_FRAME_INDEX = 10**9
+"""Largest frame index a manifest may record (a larger one marks the manifest as damaged)."""
+
+
 def _series_names(pattern: str, first: int, last: int) -> list[str]:
     return [pattern.format(index=i) for i in range(first, last + 1)]
+
+
+def _series_on_disk(out_dir: Path, pattern: str, first: int, last: int) -> list[Path]:
+    """Files of a series that exist, found by listing their folder (never by enumerating the range)."""
+    match = _SERIES.match(pattern)
+    assert match is not None
+    head = Path(match["head"])
+    folder = out_dir / head.parent
+    name = re.compile(rf"^{re.escape(head.name)}([0-9]{{{match['width']},}}){re.escape(match['tail'])}$")
+    if not folder.is_dir():
+        return []
+    found = []
+    for item in folder.iterdir():
+        hit = name.match(item.name)
+        if hit and first <= int(hit[1]) <= last and pattern.format(index=int(hit[1])) == str(item.relative_to(out_dir)):
+            found.append(item)
+    return sorted(found)
 
 
 class RunFolder:
@@ -114,20 +137,30 @@ class RunFolder:
         if self._lock is not None:
             raise RuntimeError(f"{self.out_dir}: the run folder is open already")
         out = self.out_dir
-        if out.exists() and not out.is_dir():
-            raise InputError(str(out), "--out-dir", "exists and is not a folder", "pick another --out-dir")
-        if not out.exists():
-            try:
-                out.mkdir(parents=True)
-            except FileExistsError:
-                pass
-            except OSError as error:
-                raise output_error(out, error, "--out-dir") from None
-            else:
-                self._created = True
+        if not str(out).strip() or str(out) != str(out).strip():
+            raise InputError(repr(str(out)), "--out-dir", "is empty or starts or ends with spaces",
+                             "name a folder for the run, e.g. --out-dir runs/drape")
+        try:
+            if out.resolve() == Path(out.resolve().anchor):
+                raise InputError(str(out), "--out-dir", "is the root of the file system",
+                                 "name a folder of its own for the run")
+            if out.exists() and not out.is_dir():
+                raise InputError(str(out), "--out-dir", "exists and is not a folder", "pick another --out-dir")
+            if not out.exists():
+                try:
+                    out.mkdir(parents=True)
+                except FileExistsError:
+                    pass
+                else:
+                    self._created = True
+        except OSError as error:
+            raise output_error(out, error, "--out-dir") from None
         try:
             self._lock = _acquire_lock(out / LOCK_FILE, out)
             self._check(resume=resume, overwrite=overwrite)
+        except OSError as error:
+            self.close()
+            raise output_error(out, error, "--out-dir") from None
         except BaseException:
             self.close()
             raise
@@ -139,6 +172,10 @@ class RunFolder:
         old = self._read_run_file(tolerate_damage=overwrite and not resume)
         self._old = old
         if resume:
+            if old is None and self.checkpoint_path.exists():
+                raise InputError(str(out / RUN_FILE), "--resume", "the folder has a checkpoint but no run.json "
+                                 "(the run's identity), so it cannot be checked to be this run",
+                                 "start the run over with --overwrite")
             if old is None or not self.checkpoint_path.exists():
                 raise InputError(str(out), "--resume", "the folder holds no checkpoint to resume",
                                  "run without --resume to start the run")
@@ -169,6 +206,7 @@ class RunFolder:
         self._require_open()
         if self._claimed:
             return
+        self._check_contained(self._manifest)
         if self._resume:
             self._remove_temporaries()
         else:
@@ -243,7 +281,8 @@ class RunFolder:
                 raise ValueError("'series' is not an object")
             for pattern, span in series.items():
                 if not (_SERIES.match(pattern) and _safe_name(pattern) and isinstance(span, list) and len(span) == 2
-                        and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in span)):
+                        and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= MAX_FRAME_INDEX
+                                for v in span)):
                     raise ValueError(f"series {pattern!r} is not a pattern with a [first, last] range")
         except (OSError, ValueError, KeyError, TypeError) as error:
             if tolerate_damage:
@@ -297,42 +336,63 @@ class RunFolder:
         """Recorded frame files with an index up to ``last`` that are not on disk (relative paths)."""
         missing = []
         for pattern, (first, recorded) in self.recorded_series().items():
-            missing += [n for n in _series_names(pattern, first, min(last, recorded))
-                        if not (self.out_dir / n).is_file()]
+            top = min(last, recorded)
+            present = {str(p.relative_to(self.out_dir)) for p in _series_on_disk(self.out_dir, pattern, first, top)}
+            if len(present) < top - first + 1:
+                missing += [n for n in _series_names(pattern, first, top) if n not in present]
         return missing
 
     def _recorded_paths(self, manifest: dict[str, Any]) -> list[Path]:
-        names = list(manifest["files"])
+        """The files of ``manifest`` that exist (series found by listing their folders)."""
+        paths = [self.out_dir / name for name in manifest["files"] if os.path.lexists(self.out_dir / name)]
         for pattern, (first, last) in manifest["series"].items():
-            names += _series_names(pattern, first, last)
-        return [self.out_dir / name for name in names]
+            paths += _series_on_disk(self.out_dir, pattern, first, last)
+        return paths
+
+    def _check_contained(self, manifest: dict[str, Any]) -> None:
+        """Refuse a run whose recorded files would lie outside the folder (a sub-folder that is a link)."""
+        root = self.out_dir.resolve()
+        folders = {Path(name).parent for name in manifest["files"]} | {Path(p).parent for p in manifest["series"]}
+        folders |= {Path(name) for name in ("frames", "obj", "ply")}
+        for folder in sorted(folders):
+            path = self.out_dir / folder
+            if folder != Path(".") and (path.is_symlink() or (path.exists() and not path.resolve().is_relative_to(
+                    root))):
+                raise InputError(str(path), "--out-dir", f"is a link to {path.resolve()}, outside the run folder, "
+                                 "so the run would write or delete files there", "remove the link or pick another "
+                                 "--out-dir")
 
     def _clear_previous(self) -> None:
-        """Remove exactly the files the previous run recorded (or pscc's legacy names), then its folders if empty."""
+        """Remove exactly the files the previous run recorded (or pscc's legacy names), then its folders if empty.
+
+        The files are first moved into a hidden folder inside the run folder; if one cannot be moved,
+        the ones moved so far go back and nothing is lost. Only then is the hidden folder deleted.
+        """
         manifest = self._read_manifest(tolerate_damage=True) or self._legacy_manifest()
+        self._check_contained(manifest)
         paths = self._recorded_paths(manifest)
         self._remove_temporaries(manifest)
-        folders = set()
-        for path in paths:
-            try:
-                path.unlink()
-            except FileNotFoundError:
-                pass
-            except OSError as error:
-                raise output_error(path, error, "--overwrite") from None
-            if path.parent != self.out_dir:
-                folders.add(path.parent)
-        for name in ("frames", "obj", "ply"):  # legacy runs: their frame folders
-            folders.add(self.out_dir / name)
+        trash = Path(tempfile.mkdtemp(prefix=".pscc-removed.", dir=self.out_dir))
+        moved: list[tuple[Path, Path]] = []
+        current = self.out_dir
+        try:
+            for number, current in enumerate([*paths, *(self.out_dir / n for n in (MANIFEST_FILE, RUN_FILE)
+                                                        if (self.out_dir / n).exists())]):
+                target = trash / f"{number}"
+                os.rename(current, target)
+                moved.append((current, target))
+        except OSError as error:
+            for original, target in reversed(moved):
+                os.rename(target, original)
+            shutil.rmtree(trash, ignore_errors=True)
+            raise output_error(current, error, "--overwrite", action="removed") from None
+        shutil.rmtree(trash, ignore_errors=True)
+        folders = {path.parent for path, _ in moved if path.parent != self.out_dir}
+        folders |= {self.out_dir / name for name in ("frames", "obj", "ply")}  # legacy runs: their frame folders
         for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
             try:
                 folder.rmdir()
             except OSError:
-                pass
-        for name in (MANIFEST_FILE, RUN_FILE):
-            try:
-                (self.out_dir / name).unlink()
-            except FileNotFoundError:
                 pass
 
     def _remove_temporaries(self, manifest: dict[str, Any] | None = None) -> None:
@@ -360,12 +420,16 @@ class RunFolder:
 
     # ------------------------------------------------------------------ checkpoints
 
+    def _identity_digest(self) -> bytes:
+        return hashlib.sha256(json.dumps(self.identity, sort_keys=True).encode()).digest()
+
     def save_checkpoint(self, state: dict[str, np.ndarray], frame: int, frame_stats: list[dict[str, Any]]) -> None:
         """Write the checkpoint of ``frame`` atomically (replacing the previous one)."""
         self.record(CHECKPOINT_FILE)
         arrays = {f"state_{key}": np.asarray(value) for key, value in state.items()}
         arrays["frame"] = np.array([frame], dtype=np.int64)
         arrays["frame_stats"] = np.frombuffer(json.dumps(frame_stats).encode(), dtype=np.uint8)
+        arrays["identity"] = np.frombuffer(self._identity_digest(), dtype=np.uint8)
         arrays["digest"] = np.frombuffer(_digest(arrays), dtype=np.uint8)
         buffer = io.BytesIO()
         np.savez(buffer, **arrays)
@@ -392,6 +456,9 @@ class RunFolder:
         stored = arrays.pop("digest", None)
         if stored is None or bytes(stored.astype(np.uint8)) != _digest(arrays):
             raise damaged("its content does not match its digest (damaged or edited)")
+        owner = arrays.pop("identity", None)
+        if owner is None or bytes(owner.astype(np.uint8)) != self._identity_digest():
+            raise damaged("it belongs to another run (its identity differs from run.json's)")
         try:
             frame = int(np.asarray(arrays["frame"]).reshape(-1)[0])
             stats = json.loads(bytes(arrays["frame_stats"].astype(np.uint8)).decode())

@@ -151,6 +151,9 @@ def _check_path(path: str | os.PathLike[str]) -> tuple[Path, str]:
         raise InputError(str(file_path), "extension", f"extension {shown} is not supported",
                          "use one of " + ", ".join(SUPPORTED_EXTENSIONS) + " (case-insensitive)")
     if not file_path.exists():
+        if os.path.lexists(file_path):
+            raise InputError(str(file_path), "path", "is a broken or looping link",
+                             "point the link at a mesh file, or pass the mesh file itself")
         where = "" if file_path.is_absolute() else f" (relative to {os.getcwd()!r})"
         raise InputError(str(file_path), "path", "file does not exist",
                          f"check the path {str(file_path)!r}{where}")

@@ -60,6 +60,11 @@ def build(name: str, *, triangles: int | None = None, scale: float | None = None
             if isinstance(triangles, bool) or not isinstance(triangles, int):
                 raise InputError("argument", "--triangles", f"{triangles!r} is not an integer", "pass an integer")
             scale = triangles / paper.PAPER_TRIANGLES[name]
+            low, high = (round(v * paper.PAPER_TRIANGLES[name]) for v in (paper.min_scale(name), paper.MAX_SCALE))
+            if not low <= triangles <= high:
+                raise InputError("argument", "--triangles", f"{triangles} is outside [{low}, {high}] for {name}",
+                                 f"pass --triangles between {low} and {high} (the paper's is "
+                                 f"{paper.PAPER_TRIANGLES[name]})")
         value = paper.min_scale(name) if scale is None else paper.check_scale(name, scale)
         count = round(value * paper.PAPER_TRIANGLES[name])
         check_fits(count * SIMULATION_BYTES_PER_TRIANGLE, what=f"the {name} scene at scale {value:g} (about "
@@ -74,7 +79,11 @@ def build(name: str, *, triangles: int | None = None, scale: float | None = None
         if not value > 0.0 or value > 100.0:
             raise InputError("argument", "--scale", f"{scale!r} is not in (0, 100]",
                              f"pass a fraction of the default {builtin.DEFAULT_TRIANGLES[name]} triangles")
-        triangles = max(builtin.MIN_TRIANGLES, round(value * builtin.DEFAULT_TRIANGLES[name]))
+        triangles = round(value * builtin.DEFAULT_TRIANGLES[name])
+        if triangles < builtin.MIN_TRIANGLES:
+            smallest = builtin.MIN_TRIANGLES / builtin.DEFAULT_TRIANGLES[name]
+            raise InputError("argument", "--scale", f"{scale!r} gives {triangles} triangles, fewer than "
+                             f"{builtin.MIN_TRIANGLES}", f"pass --scale {smallest:.3g} or more")
     return builtin.build_scene(name, triangles)
 
 
@@ -173,7 +182,9 @@ def open_scene(spec: str, *, triangles: int | None = None, scale: float | None =
             raise InputError("argument", "--triangles/--scale", "a scene file fixes its own size",
                              "leave out --triangles and --scale, or edit the file")
         if not path.is_file():
-            raise InputError(str(path), "path", "file does not exist", "check the path of the scene file")
+            problem = ("is a folder" if path.is_dir() else "is not a regular file" if path.exists()
+                       else "is a broken or looping link" if os.path.lexists(path) else "file does not exist")
+            raise InputError(str(path), "path", problem, "pass the path of a .toml scene file")
         try:
             raw = tomllib.loads(path.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:

@@ -29,6 +29,7 @@ from pscc.sim.config import SIM_MIN_REST_AREA_RATIO, ClothMaterial, SolverConfig
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.obstacles import Handle, KeyframedMotion, Obstacle, rotation_from_axis_angle, static_motion
 from pscc.sim.scene import Scene
+from pscc.tolerances import MIN_COORDINATE_SCALE
 
 DEFAULT_FRAMES: int = 30
 """Frames of a run when ``[scene] frames`` is not given."""
@@ -38,6 +39,16 @@ DEFAULT_FRAME_RATE: float = 30.0
 
 DEFAULT_STEPS_PER_FRAME: int = 8
 """Time steps per frame when ``steps_per_frame`` is not given."""
+
+MAX_STEPS_PER_FRAME = 100_000
+"""Largest ``steps_per_frame`` a scene file may ask for."""
+
+MIN_TIME_STEP = 1.0e-7
+"""Smallest time step [s] a scene file may ask for (below it a run of one second takes 10 million steps)."""
+
+MAX_SCENE_NUMBER = 1.0e9
+"""Largest magnitude of any number in a scene file (lengths, angles in degrees, times, rates): beyond it
+positions leave the detector's float32 range (``tolerances.MAX_COORDINATE``)."""
 
 FLATNESS_TOLERANCE: float = 1.0e-4
 """A mesh counts as flat (so its rest shape can be its projection onto the best-fit plane) when no
@@ -173,6 +184,10 @@ class SceneBuilder:
         number = float(value)
         if not math.isfinite(number):
             raise self.error(key, f"{value!r} is not finite", "write a finite number")
+        if abs(number) > MAX_SCENE_NUMBER:
+            raise self.error(key, f"{value!r} is beyond +-{MAX_SCENE_NUMBER:g}, outside what the simulator can "
+                             "represent (tolerances.MAX_COORDINATE)", f"write a number of magnitude <= "
+                             f"{MAX_SCENE_NUMBER:g}")
         if minimum is not None and (number <= minimum if strict else number < minimum):
             relation = ">" if strict else ">="
             raise self.error(key, f"{value!r} is not {relation} {minimum:g}", f"write a number {relation} {minimum:g}")
@@ -346,7 +361,12 @@ class SceneBuilder:
             spec["frame_rate"] = self.number(table.get("frame_rate", DEFAULT_FRAME_RATE), "scene.frame_rate",
                                              minimum=0.0, example="30  # frames per second")
         spec["steps_per_frame"] = self.integer(table.get("steps_per_frame", DEFAULT_STEPS_PER_FRAME),
-                                               "scene.steps_per_frame", minimum=1)
+                                               "scene.steps_per_frame", minimum=1, maximum=MAX_STEPS_PER_FRAME)
+        frame_time = spec["frame_time"] if "frame_time" in spec else 1.0 / spec["frame_rate"]
+        if frame_time / spec["steps_per_frame"] < MIN_TIME_STEP:
+            raise self.error("scene.steps_per_frame", f"the time step frame_time / steps_per_frame = "
+                             f"{frame_time / spec['steps_per_frame']:.3g} s is below {MIN_TIME_STEP:g} s (a run "
+                             "would not finish)", "use fewer steps_per_frame or a longer frame_time")
         spec["frames"] = self.integer(table.get("frames", DEFAULT_FRAMES), "scene.frames", minimum=1)
         return spec
 
@@ -431,6 +451,10 @@ class SceneBuilder:
                     raise self.error(f"{key}.sheet.{required}", "is missing",
                                      "give size = [width, height] in metres and cells = [nx, ny]")
             size = self.vector(sheet["size"], f"{key}.sheet.size", 2, minimum=0.0, example="[1.0, 1.0]  # metres")
+            if min(size) < MIN_COORDINATE_SCALE:
+                raise self.error(f"{key}.sheet.size", f"{size} has a side below {MIN_COORDINATE_SCALE:g}, too "
+                                 "small for float32 geometry (tolerances.MIN_COORDINATE_SCALE)",
+                                 f"give the size in a unit where both sides are at least {MIN_COORDINATE_SCALE:g}")
             cells = self.int_vector(sheet["cells"], f"{key}.sheet.cells", 2, 1, "[20, 20]")
             triangles = 2 * int(cells[0]) * int(cells[1])
             check_fits(triangles * SIMULATION_BYTES_PER_TRIANGLE, what=f"a sheet of {triangles:,} triangles",
@@ -749,7 +773,12 @@ class SceneBuilder:
         """Files, (k, n, 3) float64 positions and faces of a mesh sequence (glob pattern or list of files)."""
         if isinstance(value, str):
             pattern = self.file_path(value, key)
-            files = _natural_sorted(_glob(pattern))
+            try:
+                files = _natural_sorted(_glob(pattern))
+            except OSError as error:
+                raise self.error(key, f"the pattern {str(pattern)!r} cannot be searched ({error.strerror or error} "
+                                 f"at {error.filename})", "use a pattern that stays inside the folder of the "
+                                 "body's frames, e.g. \"body/frame_*.obj\"") from None
             if not files:
                 raise self.error(key, f"the pattern {str(pattern)!r} matches no file",
                                  "check the pattern; it is relative to the scene file's folder, e.g. "
@@ -827,6 +856,7 @@ def _box(size: list[float]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _glob(pattern: Path) -> list[Path]:
+    """Files matching ``pattern`` (``OSError`` when a folder on the way cannot be searched)."""
     anchor = Path(pattern.anchor)
     relative = str(pattern.relative_to(anchor))
     return [p for p in anchor.glob(relative) if p.is_file()]

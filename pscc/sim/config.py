@@ -14,6 +14,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from pscc.errors import InputError
+from pscc.tolerances import MAX_THICKNESS
 
 SIM_HINGE_DEGENERACY_RATIO: float = 1.0e-6
 """A bending hinge whose current triangle height is below this fraction of its edge length (or whose
@@ -25,13 +26,23 @@ SIM_MIN_REST_AREA_RATIO: float = 1.0e-8
 (its inverse material matrix would not exist). Dimensionless."""
 
 
-def _number(owner: str, name: str, value: Any) -> float:
+MAX_PARAMETER = 1.0e12
+"""Largest magnitude of a material or solver parameter: beyond it float32 products overflow."""
+
+MAX_ACCELERATION = 1.0e5
+"""Largest gravity component [m/s^2] (10,000 g; 9810 is gravity in millimetres per second squared)."""
+
+
+def _number(owner: str, name: str, value: Any, limit: float = MAX_PARAMETER) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError) as exc:
         raise InputError(owner, name, f"{value!r} is not a number", f"set {name} to a finite float") from exc
     if not math.isfinite(number):
         raise InputError(owner, name, f"{value!r} is not finite", f"set {name} to a finite float")
+    if abs(number) > limit:
+        raise InputError(owner, name, f"{value!r} is beyond +-{limit:g}, where float32 arithmetic overflows",
+                         f"set {name} to a value of magnitude <= {limit:g}")
     return number
 
 
@@ -49,14 +60,15 @@ def _positive(owner: str, name: str, value: Any) -> float:
     return number
 
 
-def _vector3(owner: str, name: str, value: Any) -> tuple[float, float, float]:
+def _vector3(owner: str, name: str, value: Any, limit: float = MAX_PARAMETER) -> tuple[float, float, float]:
     try:
         items = tuple(value)
     except TypeError as exc:
         raise InputError(owner, name, f"{value!r} is not a 3-tuple", f"set {name} to (x, y, z)") from exc
     if len(items) != 3:
         raise InputError(owner, name, f"{value!r} has {len(items)} components", f"set {name} to (x, y, z)")
-    return tuple(_number(owner, f"{name}[{i}]", item) for i, item in enumerate(items))  # type: ignore[return-value]
+    return tuple(_number(owner, f"{name}[{i}]", item, limit)  # type: ignore[return-value]
+                 for i, item in enumerate(items))
 
 
 @dataclass(frozen=True)
@@ -111,6 +123,9 @@ class ClothMaterial:
         for name in ("stretch_u", "stretch_v", "shear", "bending", "stretch_damping", "bending_damping",
                      "thickness", "friction"):
             _non_negative(owner, name, getattr(self, name))
+        if self.thickness > MAX_THICKNESS:
+            raise InputError(owner, "thickness", f"{self.thickness!r} exceeds {MAX_THICKNESS:g}",
+                             "give the cloth thickness in the units of the positions, e.g. 0.002 (metres)")
         coupling = _number(owner, "stretch_uv", self.stretch_uv)
         if coupling * coupling > self.stretch_u * self.stretch_v:
             raise InputError(owner, "stretch_uv",
@@ -169,8 +184,8 @@ class SolverConfig:
             InputError: a field is out of range or of the wrong kind.
         """
         owner = "SolverConfig"
-        _vector3(owner, "gravity", self.gravity)
-        _vector3(owner, "wind", self.wind)
+        _vector3(owner, "gravity", self.gravity, MAX_ACCELERATION)
+        _vector3(owner, "wind", self.wind, MAX_ACCELERATION)
         _non_negative(owner, "air_drag", self.air_drag)
         tolerance = _positive(owner, "cg_tolerance", self.cg_tolerance)
         if tolerance >= 1.0:

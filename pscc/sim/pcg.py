@@ -10,6 +10,7 @@ every ``check_every`` iterations.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import warp as wp
@@ -141,6 +142,11 @@ class PreconditionedConjugateGradient:
         absolute = self.tolerance * float(self._bb.numpy()[0]) ** 0.5
         self._dot(self.r, self.r, _RR)
         residual = float(self.scalars.numpy()[_RR]) ** 0.5
+        if not (math.isfinite(absolute) and math.isfinite(residual)):
+            # float32 overflow (e.g. an absurd force): inf <= inf must not read as convergence. The
+            # solution becomes NaN, which the caller rejects like any other non-finite result.
+            self.x.fill_(wp.vec3(math.nan, math.nan, math.nan))
+            return 0, math.inf, absolute
         if residual <= absolute:
             return 0, residual, absolute
         if self.precondition is not None:

@@ -36,6 +36,7 @@ class Simulation:
         self.frame = 0
         self.frame_stats: list[dict[str, Any]] = []
         self._last_checkpoint = 0
+        self._last_written = -1
 
     @property
     def time(self) -> float:
@@ -72,6 +73,7 @@ class Simulation:
         obstacle_vertices, _ = self.solver.obstacle_mesh(self.time)
         cloth = self.state.positions.numpy()[: self.solver.cloth_vertex_count]
         writer.write(self.frame, cloth, obstacle_vertices)
+        self._last_written = self.frame
 
     def checkpoint_state(self) -> dict[str, Any]:
         """Solver state plus the frame counter (see :meth:`ClothSolver.state_dict`)."""
@@ -145,10 +147,14 @@ class Simulation:
                 raise InputError(str(out_dir / missing[0]), "frames", f"{len(missing)} frame file(s) of the run up "
                                  f"to its checkpoint at frame {start} are missing",
                                  "restore them, or start the run over with --overwrite")
-            self.solver.load_state_dict(state, self.state)
+            try:
+                self.solver.load_state_dict(state, self.state)
+            except InputError as error:
+                raise InputError(str(folder.checkpoint_path), error.field, error.problem, error.fix) from None
             self.frame, self.frame_stats = start, frame_stats
         folder.claim()
         self._last_checkpoint = start
+        self._last_written = start if resume else -1
         try:
             for pattern in _series_patterns(formats):
                 folder.record_series(pattern, frames)
@@ -197,7 +203,7 @@ class Simulation:
     def _stopped(self, folder: RunFolder, error: BaseException) -> None:
         """Leave the folder in a clear state after ``error`` stopped the run (see :meth:`run`)."""
         out_dir = folder.out_dir
-        if not folder.resuming and self.frame == 0:
+        if not folder.resuming and self._last_written < 1:
             try:
                 folder.discard()
             except Exception:  # the original error matters more than a failed clean-up
@@ -207,17 +213,18 @@ class Simulation:
             return
         status = "interrupted" if isinstance(error, KeyboardInterrupt) else "failed"
         message = str(error) or type(error).__name__
-        checkpoint = self._last_checkpoint
+        checkpoint, kept = self._last_checkpoint, self._last_written
+        recorded = "run.json says why"
         try:
             write_json_atomic(out_dir / "stats.json", {**self.summary(), "status": status, "error": message})
-            folder.set_status(status, error=message, frame=self.frame, checkpoint=checkpoint)
-        except Exception:
-            pass
+            folder.set_status(status, error=message, frame=kept, checkpoint=checkpoint)
+        except Exception as failure:  # e.g. the disk is full: say so, keep the original error
+            recorded = f"run.json could not be updated: {failure}"
         if status == "interrupted":
-            error.add_note(f"{out_dir} keeps frames 0-{self.frame}; pass --resume to continue from its checkpoint "
+            error.add_note(f"{out_dir} keeps frames 0-{kept}; pass --resume to continue from its checkpoint "
                            f"at frame {checkpoint}")
         else:
-            error.add_note(f"{out_dir} keeps frames 0-{self.frame} of the failed run (run.json says why); "
+            error.add_note(f"{out_dir} keeps frames 0-{kept} of the failed run ({recorded}); "
                            "pass --overwrite to start it again")
 
     def summary(self) -> dict[str, Any]:

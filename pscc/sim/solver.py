@@ -335,8 +335,8 @@ class ClothSolver:
                     fix = ("Fix: use a smaller time step (more steps_per_frame), allow more max_step_halvings or "
                            "max_response_rounds under [contact], or check the scene for surfaces squeezed "
                            "between moving obstacles")
-                raise SimulationError(f"step at t={t:.6g} s could not be made intersection-free after "
-                                      f"{depth} halvings (dt={dt:.3g} s): {why}; {fix}") from None
+                raise SimulationError(f"{self.scene.name}: step at t={t:.6g} s: could not be made intersection-free "
+                                      f"after {depth} halvings (dt={dt:.3g} s): {why}; {fix}") from None
             stats["counts"]["halvings"] += 1
             middle = self._scratch.get(depth)
             if middle is None:
