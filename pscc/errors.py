@@ -12,12 +12,12 @@ class PsccError(Exception):
     """Base class of every error pscc raises on purpose."""
 
 
-class InputError(PsccError, ValueError):
-    """Bad user input: a mesh file, an array argument or an option.
+class _LocatedError(PsccError):
+    """An error whose message reads ``SOURCE: FIELD: problem. Fix: fix``.
 
     Args:
-        source: The file path or argument name the problem was found in.
-        field: The field inside it (an NPZ key, an OBJ line, an array name).
+        source: The file path or argument name the problem is about.
+        field: The field inside it (an NPZ key, an OBJ line, an option such as ``--out-dir``).
         problem: What is wrong.
         fix: What the user should do about it.
     """
@@ -29,23 +29,18 @@ class InputError(PsccError, ValueError):
         self.fix = fix
         super().__init__(f"{self.source}: {self.field}: {problem}. Fix: {fix}")
 
+    def __reduce__(self) -> tuple[type, tuple[str, str, str, str]]:
+        """Pickle by the four parts (errors cross process boundaries in batch runs)."""
+        return type(self), (self.source, self.field, self.problem, self.fix)
 
-class OutputError(PsccError):
-    """An output file or folder cannot be written (full disk, no permission, a folder in the way).
 
-    Args:
-        target: The file or folder that could not be written.
-        field: The option or field that named it (``--out``, ``--out-dir``, ``path``).
-        problem: What went wrong.
-        fix: What the user should do about it.
-    """
+class InputError(_LocatedError, ValueError):
+    """Bad user input: a mesh file, an array argument or an option (arguments as :class:`_LocatedError`)."""
 
-    def __init__(self, target: str, field: str, problem: str, fix: str) -> None:
-        self.source = str(target)
-        self.field = str(field)
-        self.problem = problem
-        self.fix = fix
-        super().__init__(f"{self.source}: {self.field}: {problem}. Fix: {fix}")
+
+class OutputError(_LocatedError):
+    """An output file or folder cannot be written: a full disk, no permission, a folder in the way
+    (arguments as :class:`_LocatedError`, ``source`` being the file or folder)."""
 
 
 class CapacityError(PsccError, RuntimeError):
