@@ -155,10 +155,11 @@ class SolverConfig:
     cg_tolerance: float = 1.0e-3
     """Relative residual at which conjugate gradients stop: ``|b - A dv| <= cg_tolerance * |b|``."""
     cg_max_iterations: int = 500
-    """Hard cap on conjugate-gradient iterations per step."""
+    """Hard cap on conjugate-gradient iterations per step (rounded up to a multiple of cg_check_every)."""
     cg_check_every: int = 10
-    """Iterations between host-side convergence checks (each is a device sync on CUDA); the reported
-    iteration count is a multiple of it unless the solve converged at the start."""
+    """Iterations between convergence tests, which run on the device (run eagerly, each reads one integer
+    back: a device sync on CUDA); the reported iteration count is a multiple of it unless the solve
+    converged at the start."""
     cg_warm_start: bool = True
     """Start CG from the previous step's dv (free vertices) instead of 0; saves iterations in smooth motion."""
     preconditioner: str = "block_jacobi"

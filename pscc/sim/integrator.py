@@ -260,7 +260,8 @@ class ImplicitEuler:
                 or handle targets of the wrong shape.
 
         Allocates: only when the contact capacity grows.
-        Capture-safe: no (CG convergence checks read the residual on the host).
+        Capture-safe: no (it reads the CG result back for the stats; the solve itself,
+        :meth:`pscc.sim.pcg.PreconditionedConjugateGradient.launch`, is).
         """
         started = time.perf_counter()
         self._check_state(state_in, "state_in")
