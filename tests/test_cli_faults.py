@@ -533,6 +533,12 @@ def test_a_full_disk_mid_run_reports_the_frames_really_kept(tmp_path: Path, monk
      "thickness = 1e10", "cloth[0].material.thickness"),
     ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[cloth.material]\n"
      "bending = 1e300", "cloth[0].material.bending"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[[obstacle]]\n"
+     "sphere = { radius = 0.1, subdivisions = 1 }\nrotate = [1e300, 0.0, 0.0]", "obstacle[0].rotate[0]"),
+    ("[scene]\nname = \"x\"\n[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[[obstacle]]\n"
+     "sphere = { radius = 0.1, subdivisions = 1 }\nkeyframes = { times = [0.0, 1.0], translations = [[0.0, 0.0, 0.0], "
+     "[1e300, 0.0, 0.0]], rotations = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]] }",
+     "obstacle[0].keyframes.translations[1][0]"),
 ])
 def test_absurd_scene_numbers_are_refused_by_key_without_warnings(tmp_path: Path, capsys, table: str,
                                                                   key: str) -> None:
@@ -581,3 +587,32 @@ def test_paths_that_are_not_files_say_what_they_are(mesh_file: Path, tmp_path: P
     plain.write_text("x")
     assert main(["detect", str(mesh_file), "--out", str(plain / "x.npz")]) == 2
     _one_error_line(capsys, "is not a folder")
+
+
+def test_a_sequence_pattern_that_cannot_be_searched_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys) -> None:
+    from pscc.scenes import scene_builder
+
+    def unsearchable(pattern: Path) -> list[Path]:
+        raise OSError(errno.EINVAL, "Invalid argument", "/proc/1/task/1/net")
+
+    monkeypatch.setattr(scene_builder, "_glob", unsearchable)
+    scene = tmp_path / "scene.toml"
+    scene.write_text("[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[[obstacle]]\n"
+                     "sequence = \"/**/*.obj\"\n")
+    assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"{scene}: obstacle[0].sequence", "cannot be searched", "/proc/1/task/1/net")
+
+
+def test_an_out_dir_name_too_long_is_one_line(tmp_path: Path, capsys) -> None:
+    out = tmp_path / ("a" * 300)
+    assert main(["simulate", "twist", "--frames", "1", *SMALL, "--out-dir", str(out)]) == 2
+    _one_error_line(capsys, "--out-dir: cannot be written: the file name is too long")
+
+
+def test_a_step_failure_names_the_scene_and_the_step(tmp_path: Path, capsys) -> None:
+    scene = tmp_path / "crossing.toml"
+    scene.write_text(CROSSING.format(allow="true"))
+    assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 2
+    _one_error_line(capsys, "pscc: error: crossing: step at t=0 s: could not be made intersection-free",
+                    "Fix: separate the surfaces")

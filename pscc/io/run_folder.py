@@ -108,7 +108,6 @@ class RunFolder:
         self._resume = False
         self._overwrite = False
         self._manifest: dict[str, Any] = {"files": [], "series": {}}
-        self._old: dict[str, Any] | None = None  # run.json of the run found in the folder
 
     # ------------------------------------------------------------------ lifetime
 
@@ -170,7 +169,6 @@ class RunFolder:
     def _check(self, *, resume: bool, overwrite: bool) -> None:
         out = self.out_dir
         old = self._read_run_file(tolerate_damage=overwrite and not resume)
-        self._old = old
         if resume:
             if old is None and self.checkpoint_path.exists():
                 raise InputError(str(out / RUN_FILE), "--resume", "the folder has a checkpoint but no run.json "

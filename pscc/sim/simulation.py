@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Callable
+from numbers import Integral
 from pathlib import Path
 from typing import Any
 
@@ -119,11 +120,12 @@ class Simulation:
                 ``frames``, frame files of a resumed run are missing, or ``checkpoint_every`` < 1.
             OutputError: a file cannot be written (full disk, no permission).
         """
-        if isinstance(checkpoint_every, bool) or not isinstance(checkpoint_every, int) or checkpoint_every < 1:
+        if isinstance(checkpoint_every, bool) or not isinstance(checkpoint_every, Integral) or checkpoint_every < 1:
             raise InputError("argument", "--checkpoint-every", f"{checkpoint_every!r} is not an integer >= 1",
                              "pass 1 or more")
-        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+        if isinstance(frames, bool) or not isinstance(frames, Integral) or frames < 1:
             raise InputError("argument", "--frames", f"{frames!r} is not an integer >= 1", "pass --frames 1 or more")
+        frames, checkpoint_every = int(frames), int(checkpoint_every)
         formats = tuple(dict.fromkeys(("npz", *parse_formats(formats))))
         if isinstance(out_dir, RunFolder):
             return self._run(out_dir, frames, progress, checkpoint_every, formats, before_first_frame)

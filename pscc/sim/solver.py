@@ -27,6 +27,7 @@ springs between cloth and obstacles need no special case.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -59,7 +60,10 @@ class SimulationError(PsccError):
 
 def _finite_in_range(positions: np.ndarray) -> bool:
     """Whether every coordinate is finite and within :data:`pscc.tolerances.MAX_COORDINATE` (the detector's range)."""
-    return bool(np.all(np.isfinite(positions))) and float(np.abs(positions).max(initial=0.0)) <= MAX_COORDINATE
+    if positions.size == 0:
+        return True
+    largest, smallest = float(positions.max()), float(positions.min())  # NaN propagates into both
+    return math.isfinite(largest) and math.isfinite(smallest) and max(largest, -smallest) <= MAX_COORDINATE
 
 
 class _StepRejected(Exception):
