@@ -186,7 +186,7 @@ def _simulate(args: argparse.Namespace) -> int:
         described = f"{scene.name}: {scene.description}" if scene.description else scene.name
         print(f"{described}; {scene.faces.shape[0]:,} cloth triangles, "
               f"{sum(o.faces.shape[0] for o in scene.obstacles):,} obstacle triangles, dt = {scene.time_step:.4g} s")
-        simulation = Simulation(scene, device=device, contact=contact)
+        simulation = Simulation(scene, device=device, contact=contact, graph=not args.no_graph)
 
         def write_scene_file() -> None:
             folder.record("scene.toml")
@@ -275,6 +275,8 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--method", default=None, choices=METHODS, help="collision detection method")
     simulate.add_argument("--out-dir", default="simulation-output", help="folder for the outputs")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    simulate.add_argument("--no-graph", action="store_true",
+                          help="launch every step eagerly instead of replaying a recorded graph per frame")
     simulate.add_argument("--resume", action="store_true", help="continue the run in --out-dir from its checkpoint")
     simulate.add_argument("--overwrite", action="store_true", help="replace another run's output in --out-dir")
     simulate.add_argument("--checkpoint-every", type=int, default=10, help="frames between checkpoints")

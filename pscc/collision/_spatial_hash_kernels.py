@@ -1,28 +1,35 @@
 """Kernels of :class:`pscc.collision.spatial_hash.SpatialHash` (private: only that host imports them).
 
-Thread mappings, in launch order:
+Everything the host once decided from read-back counts is decided on the device: single-thread
+kernels read the counts and write the small ``grid`` state and the ``info`` counters that the
+later kernels read; every other kernel runs at a fixed capacity and returns early past the
+device count. Thread mappings, in launch order:
 
-====================================  ==============================================================
-kernel                                one thread per
-====================================  ==============================================================
-``_reduce_scene_chunks``              chunk of faces (min corner, max corner, axis-length sum)
-``_reduce_scene_total``               (single thread) the whole scene, in a fixed order
-``_count_face_cells``                 face: cells its box overlaps, grid extent (atomic max)
-``_gather_entry_info``                (single thread) entry count and grid size for the host
-``_fill_entries``                     face: its (key, face) entries, one per overlapped cell
-``_mark_runs``                        sorted entry: head flags of groups and of cells
-``_write_tables``                     sorted entry: group ranges, group cell, cell ends
-``_compute_group_slabs``              group (group slab test only): its axis and slab
-``_plan_rows``                        group: slab tests against later groups of its cell, its rows
-                                      (runs of later groups that pass) and their BV tests
-``_gather_table_info``                (single thread) group and cell counts, before the rank buffers
-                                      are reused for the rows
-``_gather_row_info``                  (single thread) rows, face tests, slab tests, same-node pairs
-``_write_rows``                       group: its rows (a-range = the group, b-range = a run of
-                                      later groups of its cell) and the BV tests of each
-``_test_bounding_volumes``            BV test (a batch of the global test index range)
-``_compute_pair_keys``                emitted pair: its sort key a * face_count + b
-====================================  ==============================================================
+=======================================  =============================================================
+kernel                                   one thread per
+=======================================  =============================================================
+``_reset_counters``                      (single thread) zeroes ``info``, the pair counter, grid maxima
+``_reduce_scene_chunks``                 chunk of faces (min corner, max corner, axis-length sum)
+``_reduce_scene_total``                  (single thread) the whole scene, in a fixed order
+``_clear_marks`` ... ``_check_marks``    face (``face_order`` only): each face must be listed once
+``_plan_grid``                           (single thread) origin, slab margin, first cell size; starts
+                                         the grid loop unless the input is bad
+``_count_face_cells``                    face (grid loop body): cells its box overlaps, grid extent
+``_check_grid``                          (single thread, loop body) doubles the cell size while the
+                                         entries or the grid are too big, else ends the loop
+``_fill_entries``                        face: its (key, face) entries, one per overlapped cell
+``_pad_entries``                         entry slot: unused slots get the largest key (sorted last)
+``_mark_runs`` / ``_write_tables``       entry slot: head flags / group ranges, group cell, cell ends
+``_gather_table_info``                   (single thread) group and cell counts
+``_compute_group_slabs``                 group slot (group slab test only): its axis and slab
+``_plan_rows``                           group slot: slab tests against later groups of its cell, its
+                                         rows (runs of later groups that pass) and their BV tests
+``_gather_row_info``                     (single thread) row count, the tests each test thread runs
+``_write_rows``                          group slot: its rows and the BV tests of each
+``_test_bounding_volumes``               test thread: a contiguous chunk of the BV tests
+``_compute_pair_keys``                   pair slot: sort key a * face_count + b (unused: largest)
+``_gather_summary``                      (single thread) every counter in one float64 array
+=======================================  =============================================================
 """
 
 from __future__ import annotations
@@ -36,25 +43,73 @@ wp.set_module_options({"enable_backward": False})
 
 NODE_BITS: int = 32
 """Most low bits of an entry key that hold the node id (its uint32 bit pattern); the cell id sits
-above. A call that bounds its node ids uses fewer (``GridArgs.node_bits``), so the sort has less to do."""
+above. A call that bounds its node ids uses fewer (``node_bits``), so the sort has less to do."""
 
 MASK_BITS: int = 64
 """Later groups of a cell whose slab test result a group keeps (bits of ``group_mask``); later
 groups past these are always tested face by face (conservative)."""
 
+MAX_GRID_CELLS: int = 2**31 - 1  # a CellId must fit in the high 31 bits of a non-negative int64 key
+
+# Slots of the int64 ``info`` counters (device). "Live" counts are what the later stages use: the
+# count when its buffer holds it, else 0 (the stages after an overflow do nothing).
+INFO_ENTRIES: int = 0  # entries of the final grid (may exceed the entry capacity)
+INFO_GROUPS: int = 1  # {cell, node} groups (when the entries fit)
+INFO_CELLS: int = 2  # non-empty cells (when the entries fit)
+INFO_ROWS: int = 3  # work rows (when the groups fit)
+INFO_FACE_TESTS: int = 4  # face box tests of the rows
+INFO_SLAB_TESTS: int = 5  # group slab tests run
+INFO_SAME_NODE: int = 6  # face pairs of one node met in two groups (a face_order that splits a node)
+INFO_BAD_BOXES: int = 7  # boxes with NaN/Inf or lower > upper
+INFO_BAD_NODES: int = 8  # node ids outside [0, node_id_bound)
+INFO_BAD_ORDER: int = 9  # face_order ids out of range, faces listed twice or never
+INFO_COARSENINGS: int = 10  # times the cell size was doubled
+INFO_WANTED_CELLS: int = 11  # > 0: cells of a grid refused only for the sort's cell bits
+INFO_LIVE_ENTRIES: int = 12
+INFO_LIVE_GROUPS: int = 13
+INFO_LIVE_ROWS: int = 14
+INFO_LIVE_TESTS: int = 15  # BV tests the test pass runs
+INFO_TEST_CHUNK: int = 16  # BV tests per test thread (a contiguous chunk each)
+INFO_SIZE: int = 17
+"""Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size and the pairs emitted."""
+SUMMARY_DIMS: int = INFO_SIZE
+SUMMARY_CELL_SIZE: int = INFO_SIZE + 3
+SUMMARY_PAIRS: int = INFO_SIZE + 4
+SUMMARY_SIZE: int = INFO_SIZE + 5
+
 _MASK_BITS = wp.constant(MASK_BITS)
-_SLAB_PAD = wp.constant(float(tolerances.GROUP_SLAB_RELATIVE_PAD))
+_MAX_GRID_CELLS = wp.constant(wp.int64(MAX_GRID_CELLS))
+_MAX_GRID_CELLS_F = wp.constant(wp.float64(MAX_GRID_CELLS))
+_SLAB_PAD = wp.constant(wp.float64(tolerances.GROUP_SLAB_RELATIVE_PAD))
+_ENTRIES = wp.constant(INFO_ENTRIES)
+_GROUPS = wp.constant(INFO_GROUPS)
+_CELLS = wp.constant(INFO_CELLS)
+_ROWS = wp.constant(INFO_ROWS)
+_FACE_TESTS = wp.constant(INFO_FACE_TESTS)
+_SLAB_TESTS = wp.constant(INFO_SLAB_TESTS)
+_SAME_NODE = wp.constant(INFO_SAME_NODE)
+_BAD_BOXES = wp.constant(INFO_BAD_BOXES)
+_BAD_NODES = wp.constant(INFO_BAD_NODES)
+_BAD_ORDER = wp.constant(INFO_BAD_ORDER)
+_COARSENINGS = wp.constant(INFO_COARSENINGS)
+_WANTED_CELLS = wp.constant(INFO_WANTED_CELLS)
+_LIVE_ENTRIES = wp.constant(INFO_LIVE_ENTRIES)
+_LIVE_GROUPS = wp.constant(INFO_LIVE_GROUPS)
+_LIVE_ROWS = wp.constant(INFO_LIVE_ROWS)
+_LIVE_TESTS = wp.constant(INFO_LIVE_TESTS)
+_TEST_CHUNK = wp.constant(INFO_TEST_CHUNK)
+_INFO_SIZE = wp.constant(INFO_SIZE)
 
 
 @wp.struct
-class GridArgs:
-    """The uniform grid: cell of p = floor((p - origin) / cell_size) per axis; ``node_bits`` low bits
-    of an entry key hold the node id."""
+class GridState:
+    """The grid of the current call, written on the device: cell of p = floor((p - origin) /
+    cell_size) per axis, ``dims`` cells per axis; ``margin`` grows each end of a group slab."""
 
     origin: wp.vec3
     cell_size: float
     dims: wp.vec3i
-    node_bits: int
+    margin: float
 
 
 @wp.struct
@@ -68,7 +123,6 @@ class TableArgs:
     row_span: wp.array(dtype=wp.vec3i)
     row_work: wp.array(dtype=wp.int64)
     row_scan: wp.array(dtype=wp.int64)
-    row_count: int
 
 
 @wp.struct
@@ -76,8 +130,7 @@ class SlabArgs:
     """Face geometry of the group slab test (``enabled`` = 0: every group pair is tested face by face).
 
     ``positions_t1`` is read only when ``swept`` != 0 (CCD: the slab holds both ends of the step).
-    ``margin`` grows each end of a slab: the half distance plus the rounding bound
-    ``GROUP_SLAB_RELATIVE_PAD (M + half_distance)``, M a bound on |p|_1 over the scene's vertices.
+    The margin that grows each end of a slab depends on the scene box, so it is in ``GridState``.
     """
 
     enabled: int
@@ -85,8 +138,6 @@ class SlabArgs:
     positions_t0: wp.array(dtype=wp.vec3)
     positions_t1: wp.array(dtype=wp.vec3)
     swept: int
-    half_distance: float
-    margin: float
     min_work: wp.int64
 
 
@@ -117,6 +168,22 @@ def entry_key(cell: wp.int64, node: int, node_bits: int) -> wp.int64:
 def key_cell(key: wp.int64, node_bits: int) -> wp.int64:
     """The cell part of an entry key."""
     return key >> wp.int64(node_bits)
+
+
+@wp.kernel
+def _reset_counters(
+    # out:
+    info: wp.array(dtype=wp.int64),
+    counts: wp.array(dtype=wp.int64),
+    grid_max: wp.array(dtype=wp.int32),
+):
+    """A single thread: zeroes the counters of a call (a kernel, not a memset, so it is captured alike)."""
+    for k in range(_INFO_SIZE):
+        info[k] = wp.int64(0)
+    for k in range(4):
+        grid_max[k] = 0
+        if k < 2:
+            counts[k] = wp.int64(0)
 
 
 @wp.kernel
@@ -165,6 +232,7 @@ def _reduce_scene_total(
     chunk_count: int,
     # out:
     scene: wp.array(dtype=wp.float64),
+    info: wp.array(dtype=wp.int64),
 ):
     """A single thread: folds the chunks in index order, so the result is deterministic."""
     lo = wp.vec3(wp.inf, wp.inf, wp.inf)
@@ -181,6 +249,106 @@ def _reduce_scene_total(
         scene[3 + k] = wp.float64(hi[k])
     scene[6] = length_sum
     scene[7] = wp.float64(bad)
+    info[_BAD_BOXES] = wp.int64(bad)
+
+
+@wp.kernel
+def _clear_marks(
+    # out:
+    marks: wp.array(dtype=wp.int64),
+):
+    """One thread per face: its permutation mark to 0."""
+    marks[wp.tid()] = wp.int64(0)
+
+
+@wp.kernel
+def _mark_face_order(
+    # in:
+    face_order: wp.array(dtype=wp.int32),
+    # out:
+    marks: wp.array(dtype=wp.int64),
+    info: wp.array(dtype=wp.int64),
+):
+    """One thread per face position k: marks face ``face_order[k]`` (an id outside the faces is an
+    order error)."""
+    f = face_order[wp.tid()]
+    if f < 0 or f >= marks.shape[0]:
+        wp.atomic_add(info, _BAD_ORDER, wp.int64(1))
+    else:
+        wp.atomic_add(marks, f, wp.int64(1))
+
+
+@wp.kernel
+def _check_marks(
+    # in:
+    marks: wp.array(dtype=wp.int64),
+    # out:
+    info: wp.array(dtype=wp.int64),
+):
+    """One thread per face: an order error unless the order lists it exactly once."""
+    if marks[wp.tid()] != wp.int64(1):
+        wp.atomic_add(info, _BAD_ORDER, wp.int64(1))
+
+
+@wp.func
+def _fit_estimate(cell_size: wp.float64, scene: wp.array(dtype=wp.float64), info: wp.array(dtype=wp.int64)) -> float:
+    """The cell size rounded to float32, doubled while the grid estimate prod(extent / size + 2) is
+    not finite or exceeds MAX_GRID_CELLS (each doubling counted in ``info``)."""
+    size = cell_size
+    searching = bool(True)
+    while searching:
+        size = wp.float64(wp.float32(size))
+        e0 = (scene[3] - scene[0]) / size + wp.float64(2.0)
+        e1 = (scene[4] - scene[1]) / size + wp.float64(2.0)
+        e2 = (scene[5] - scene[2]) / size + wp.float64(2.0)
+        estimate = e0 * e1 * e2
+        if wp.isfinite(e0) and wp.isfinite(e1) and wp.isfinite(e2) and estimate <= _MAX_GRID_CELLS_F:
+            searching = False
+        else:
+            size = size * wp.float64(2.0)
+            info[_COARSENINGS] = info[_COARSENINGS] + wp.int64(1)
+    return wp.float32(size)
+
+
+@wp.kernel
+def _plan_grid(
+    # in:
+    scene: wp.array(dtype=wp.float64),
+    face_count: int,
+    cell_size_factor: wp.float64,
+    fixed_cell_size: wp.float64,
+    half_distance: wp.float64,
+    # out:
+    grid: wp.array(dtype=GridState),
+    info: wp.array(dtype=wp.int64),
+    loop_flag: wp.array(dtype=wp.int32),
+):
+    """A single thread: origin = the scene's min corner, the slab margin (from the scene box), the
+    first cell size (``fixed_cell_size`` when > 0, else the factor x the mean box axis length; the
+    scene extent when every box is a point). Starts the grid loop unless a box or the order is bad."""
+    state = GridState()
+    state.origin = wp.vec3(wp.float32(scene[0]), wp.float32(scene[1]), wp.float32(scene[2]))
+    state.dims = wp.vec3i(0, 0, 0)
+    # M = sum_k max(|lower_k|, |upper_k|) bounds |p|_1 for every vertex of the scene.
+    size = wp.float64(0.0)
+    for k in range(3):
+        lower = scene[k]
+        upper = lower + (scene[3 + k] - scene[k])
+        size = size + wp.max(wp.abs(lower), wp.abs(upper))
+    state.margin = wp.float32(half_distance * (wp.float64(1.0) + _SLAB_PAD) + _SLAB_PAD * (size + half_distance))
+    cell = fixed_cell_size
+    if cell <= wp.float64(0.0):
+        cell = cell_size_factor * (scene[6] / wp.float64(face_count))
+        if not (cell > wp.float64(0.0)):
+            cell = wp.max(wp.max(scene[3] - scene[0], scene[4] - scene[1]), scene[5] - scene[2])
+            cell = wp.max(cell, wp.float64(1.0))
+    state.cell_size = float(1.0)
+    flag = int(0)
+    if info[_BAD_BOXES] == wp.int64(0) and info[_BAD_ORDER] == wp.int64(0):
+        state.cell_size = _fit_estimate(cell, scene, info)
+        flag = 1
+    grid[0] = state
+    loop_flag[0] = flag
 
 
 @wp.kernel
@@ -188,8 +356,7 @@ def _count_face_cells(
     # in:
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    cell_size: float,
+    grid: wp.array(dtype=GridState),
     node_id: wp.array(dtype=wp.int32),
     node_limit: int,
     face_order: wp.array(dtype=wp.int32),
@@ -208,8 +375,9 @@ def _count_face_cells(
         node = node_id[f]
         if node < 0 or node >= node_limit:
             wp.atomic_add(grid_max, 3, 1)
-    lo = cell_of_point(face_lower[f], origin, cell_size)
-    hi = cell_of_point(face_upper[f], origin, cell_size)
+    state = grid[0]
+    lo = cell_of_point(face_lower[f], state.origin, state.cell_size)
+    hi = cell_of_point(face_upper[f], state.origin, state.cell_size)
     face_cells[k] = wp.int64(hi[0] - lo[0] + 1) * wp.int64(hi[1] - lo[1] + 1) * wp.int64(hi[2] - lo[2] + 1)
     wp.atomic_max(grid_max, 0, hi[0])
     wp.atomic_max(grid_max, 1, hi[1])
@@ -217,18 +385,49 @@ def _count_face_cells(
 
 
 @wp.kernel
-def _gather_entry_info(
+def _check_grid(
     # in:
     face_end: wp.array(dtype=wp.int64),
-    grid_max: wp.array(dtype=wp.int32),
+    scene: wp.array(dtype=wp.float64),
+    max_entries: wp.int64,
+    cell_limit: wp.int64,
+    entry_capacity: wp.int64,
     # out:
+    grid: wp.array(dtype=GridState),
+    grid_max: wp.array(dtype=wp.int32),
     info: wp.array(dtype=wp.int64),
+    loop_flag: wp.array(dtype=wp.int32),
 ):
-    """A single thread: [entries, N_x, N_y, N_z, bad node ids] in one array, so the host reads it at once."""
-    info[0] = face_end[face_end.shape[0] - 1]
-    for k in range(3):
-        info[1 + k] = wp.int64(grid_max[k] + 1)
-    info[4] = wp.int64(grid_max[3])
+    """A single thread, after a count: too many entries or cells (more than MAX_GRID_CELLS, or more
+    than ``cell_limit`` = 2^cell_bits, the sort's range) double the cell size and keep the loop
+    going; else the grid is final (``loop_flag`` = 0). Resets the grid maxima for the next count."""
+    state = grid[0]
+    entries = face_end[face_end.shape[0] - 1]
+    dims = wp.vec3i(grid_max[0] + 1, grid_max[1] + 1, grid_max[2] + 1)
+    cells = wp.int64(dims[0]) * wp.int64(dims[1]) * wp.int64(dims[2])
+    info[_BAD_NODES] = wp.int64(grid_max[3])
+    for k in range(4):
+        grid_max[k] = 0
+    flag = int(1)
+    if entries > max_entries or cells > _MAX_GRID_CELLS:
+        info[_COARSENINGS] = info[_COARSENINGS] + wp.int64(1)
+    elif cells > cell_limit:
+        # A grid the guard accepts but the sort's cell bits cannot hold: coarsen it (the pairs do
+        # not change) and report the cells it wanted, so the sync point can widen the bits.
+        if info[_WANTED_CELLS] == wp.int64(0):
+            info[_WANTED_CELLS] = cells
+        info[_COARSENINGS] = info[_COARSENINGS] + wp.int64(1)
+    else:
+        flag = 0
+    if flag != 0:
+        state.cell_size = _fit_estimate(wp.float64(state.cell_size) * wp.float64(2.0), scene, info)
+    else:
+        state.dims = dims
+        info[_ENTRIES] = entries
+        if entries <= entry_capacity:
+            info[_LIVE_ENTRIES] = entries
+    grid[0] = state
+    loop_flag[0] = flag
 
 
 @wp.kernel
@@ -239,29 +438,51 @@ def _fill_entries(
     node_id: wp.array(dtype=wp.int32),
     face_cells: wp.array(dtype=wp.int64),
     face_end: wp.array(dtype=wp.int64),
-    grid: GridArgs,
+    grid: wp.array(dtype=GridState),
+    node_bits: int,
     face_order: wp.array(dtype=wp.int32),
     ordered: int,
+    info: wp.array(dtype=wp.int64),
     # out:
     keys: wp.array(dtype=wp.int64),
     faces: wp.array(dtype=wp.int32),
 ):
-    """One thread per face position k (as in ``_count_face_cells``): writes the face's entries at slot
-    k of the exclusive scan of cell counts, so entries lie in face-position order."""
+    """One thread per face position k (as in ``_count_face_cells``): its entries at slot k of the exclusive
+    scan of cell counts (entries in face-position order); nothing when the entries do not fit."""
+    if info[_LIVE_ENTRIES] == wp.int64(0):
+        return
     k = wp.tid()
     f = k
     if ordered != 0:
         f = face_order[k]
-    lo = cell_of_point(face_lower[f], grid.origin, grid.cell_size)
-    hi = cell_of_point(face_upper[f], grid.origin, grid.cell_size)
+    state = grid[0]
+    lo = cell_of_point(face_lower[f], state.origin, state.cell_size)
+    hi = cell_of_point(face_upper[f], state.origin, state.cell_size)
     node = node_id[f]
     slot = int(face_end[k] - face_cells[k])
     for x in range(lo[0], hi[0] + 1):
         for y in range(lo[1], hi[1] + 1):
             for z in range(lo[2], hi[2] + 1):
-                keys[slot] = entry_key(linear_cell_id(wp.vec3i(x, y, z), grid.dims), node, grid.node_bits)
+                keys[slot] = entry_key(linear_cell_id(wp.vec3i(x, y, z), state.dims), node, node_bits)
                 faces[slot] = f
                 slot += 1
+
+
+@wp.kernel
+def _pad_entries(
+    # in:
+    info: wp.array(dtype=wp.int64),
+    pad_key: wp.int64,
+    # out:
+    keys: wp.array(dtype=wp.int64),
+    faces: wp.array(dtype=wp.int32),
+):
+    """One thread per entry slot: slots past the live entries get the largest key (sorted last)."""
+    i = wp.tid()
+    if wp.int64(i) < info[_LIVE_ENTRIES]:
+        return
+    keys[i] = pad_key
+    faces[i] = 0
 
 
 @wp.kernel
@@ -269,15 +490,20 @@ def _mark_runs(
     # in:
     keys: wp.array(dtype=wp.int64),
     node_bits: int,
+    info: wp.array(dtype=wp.int64),
     # out:
     group_head: wp.array(dtype=wp.int32),
     cell_head: wp.array(dtype=wp.int32),
 ):
-    """One thread per sorted entry: 1 where a new {cell, node} group (or a new cell) begins."""
+    """One thread per entry slot: 1 where a new {cell, node} group (or a new cell) begins, 0 past the
+    live entries."""
     i = wp.tid()
     g = int(1)
     c = int(1)
-    if i > 0:
+    if wp.int64(i) >= info[_LIVE_ENTRIES]:
+        g = 0
+        c = 0
+    elif i > 0:
         if keys[i] == keys[i - 1]:
             g = 0
         if key_cell(keys[i], node_bits) == key_cell(keys[i - 1], node_bits):
@@ -293,29 +519,55 @@ def _write_tables(
     group_rank: wp.array(dtype=wp.int32),
     cell_rank: wp.array(dtype=wp.int32),
     node_bits: int,
+    info: wp.array(dtype=wp.int64),
     # out:
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
 ):
-    """One thread per sorted entry: run heads and tails write the ranges of their group and cell.
+    """One thread per live entry: run heads and tails write the ranges of their group and cell
+    (groups past the group capacity are not written; the sync point grows it).
 
     Heads and tails are recomputed from the keys (not read from the head flags), because
-    ``group_start`` and ``cell_end`` may share storage with the flags of ``_mark_runs``.
+    ``group_start`` and ``cell_end`` share storage with the flags of ``_mark_runs``.
     """
     i = wp.tid()
-    n = keys.shape[0]
+    n = int(info[_LIVE_ENTRIES])
+    if i >= n:
+        return
     key = keys[i]
     g = group_rank[i] - 1
     c = cell_rank[i] - 1
-    if i == 0 or keys[i - 1] != key:
-        group_start[g] = i
-        group_cell[g] = c
-    if i == n - 1 or keys[i + 1] != key:
-        group_end[g] = i + 1
+    if g < group_end.shape[0]:
+        if i == 0 or keys[i - 1] != key:
+            group_start[g] = i
+            group_cell[g] = c
+        if i == n - 1 or keys[i + 1] != key:
+            group_end[g] = i + 1
     if i == n - 1 or key_cell(keys[i + 1], node_bits) != key_cell(key, node_bits):
         cell_end[c] = i + 1
+
+
+@wp.kernel
+def _gather_table_info(
+    # in:
+    group_rank: wp.array(dtype=wp.int32),
+    cell_rank: wp.array(dtype=wp.int32),
+    group_capacity: wp.int64,
+    # out:
+    info: wp.array(dtype=wp.int64),
+):
+    """A single thread: group and cell counts (ranks of the last live entry, before the rank arrays
+    are reused); the later stages see the groups only when they fit the capacity."""
+    n = int(info[_LIVE_ENTRIES])
+    if n == 0:
+        return
+    groups = wp.int64(group_rank[n - 1])
+    info[_GROUPS] = groups
+    info[_CELLS] = wp.int64(cell_rank[n - 1])
+    if groups <= group_capacity:
+        info[_LIVE_GROUPS] = groups
 
 
 @wp.func
@@ -348,15 +600,18 @@ def _compute_group_slabs(
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
     slab: SlabArgs,
+    info: wp.array(dtype=wp.int64),
     # out:
     group_axis: wp.array(dtype=wp.vec3),
     group_slab: wp.array(dtype=wp.vec2),
 ):
-    """One thread per group: axis = unit normal of its middle face at mid-step (any axis is valid;
+    """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
     this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
     A zero axis (a degenerate middle face) marks a group that is never culled. Groups
     whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped."""
     g = wp.tid()
+    if wp.int64(g) >= info[_LIVE_GROUPS]:
+        return
     start = group_start[g]
     end = group_end[g]
     cell = group_cell[g]
@@ -398,6 +653,7 @@ def _slab_pair_passes(
     h_start: int,
     h_end: int,
     slab: SlabArgs,
+    margin: float,
 ) -> bool:
     """False when the faces of groups g and h are provably farther apart than twice the half distance:
     the smaller group projected on the larger group's axis misses that group's slab."""
@@ -413,9 +669,9 @@ def _slab_pair_passes(
         return True
     own = group_slab[owner]
     other = _project_group(entry_face, other_start, other_end, axis, slab)
-    if other[0] - slab.margin > own[1] + slab.margin:
+    if other[0] - margin > own[1] + margin:
         return False
-    if own[0] - slab.margin > other[1] + slab.margin:
+    if own[0] - margin > other[1] + margin:
         return False
     return True
 
@@ -423,7 +679,6 @@ def _slab_pair_passes(
 @wp.kernel
 def _plan_rows(
     # in:
-    group_count: int,
     entry_key: wp.array(dtype=wp.int64),
     entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
@@ -433,23 +688,26 @@ def _plan_rows(
     group_axis: wp.array(dtype=wp.vec3),
     group_slab: wp.array(dtype=wp.vec2),
     slab: SlabArgs,
+    grid: wp.array(dtype=GridState),
     check_keys: int,
     # out:
     group_mask: wp.array(dtype=wp.uint64),
     row_count: wp.array(dtype=wp.int32),
-    work_counts: wp.array(dtype=wp.int64),
+    info: wp.array(dtype=wp.int64),
 ):
-    """One thread per group g: walks the later groups of its cell (the rest of the workLoadHashTable
-    row), slab-tests the first MASK_BITS of them whose face tests would number at least
-    ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts its rows (maximal runs
-    of later groups that pass), its face tests (work_counts[0]) and its slab tests (work_counts[1]).
+    """One thread per group slot g (0 rows past the live groups): walks the later groups of its cell
+    (the rest of the workLoadHashTable row), slab-tests the first MASK_BITS of them whose face tests
+    would number at least ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts
+    its rows (maximal runs of later groups that pass), its face tests and its slab tests (``info``).
     With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
-    same key never passes and its face pairs are counted in work_counts[2] (they must be 0: faces of
+    same key never passes and its face pairs are counted as same-node pairs (they must be 0: faces of
     one node are never paired). Once no check is left for the rest of the cell (no key check, and no
     slab test or past MASK_BITS), the rest is one run, added in O(1)."""
     g = wp.tid()
-    if g >= group_count:
+    if wp.int64(g) >= info[_LIVE_GROUPS]:
+        row_count[g] = 0
         return
+    margin = grid[0].margin
     start = group_start[g]
     end = group_end[g]
     n_g = wp.int64(end - start)
@@ -478,7 +736,8 @@ def _plan_rows(
         elif slab.enabled != 0 and t < _MASK_BITS:
             if n_g * wp.int64(h_end - b) >= slab.min_work:
                 slab_tests += wp.int64(1)
-                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab)
+                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab,
+                                           margin)
             if passed:
                 mask = mask | (wp.uint64(1) << wp.uint64(t))
         if passed:
@@ -493,47 +752,41 @@ def _plan_rows(
         group_mask[g] = mask
     row_count[g] = runs
     if work > wp.int64(0):
-        wp.atomic_add(work_counts, 0, work)
+        wp.atomic_add(info, _FACE_TESTS, work)
     if slab_tests > wp.int64(0):
-        wp.atomic_add(work_counts, 1, slab_tests)
+        wp.atomic_add(info, _SLAB_TESTS, slab_tests)
     if same_node > wp.int64(0):
-        wp.atomic_add(work_counts, 2, same_node)
-
-
-@wp.kernel
-def _gather_table_info(
-    # in:
-    group_rank: wp.array(dtype=wp.int32),
-    cell_rank: wp.array(dtype=wp.int32),
-    # out:
-    info: wp.array(dtype=wp.int64),
-):
-    """A single thread: [groups, cells] of the last sorted entry (before the rank arrays are reused)."""
-    last = group_rank.shape[0] - 1
-    info[0] = wp.int64(group_rank[last])
-    info[1] = wp.int64(cell_rank[last])
+        wp.atomic_add(info, _SAME_NODE, same_node)
 
 
 @wp.kernel
 def _gather_row_info(
     # in:
     row_end: wp.array(dtype=wp.int32),
-    work_counts: wp.array(dtype=wp.int64),
+    row_capacity: wp.int64,
+    test_threads: wp.int64,
+    min_chunk: wp.int64,
     # out:
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: info[2:6] = [rows, face tests, slab tests, same-node face pairs], next to
-    [groups, cells], so the host reads all six at once."""
-    info[2] = wp.int64(row_end[row_end.shape[0] - 1])
-    info[3] = work_counts[0]
-    info[4] = work_counts[1]
-    info[5] = work_counts[2]
+    """A single thread: the row count; when the rows fit, the BV tests of the test pass and the
+    chunk of them each of the ``test_threads`` threads runs (at least ``min_chunk``)."""
+    groups = int(info[_LIVE_GROUPS])
+    if groups == 0:
+        return
+    rows = wp.int64(row_end[groups - 1])
+    info[_ROWS] = rows
+    if rows > row_capacity:
+        return
+    info[_LIVE_ROWS] = rows
+    tests = info[_FACE_TESTS]
+    info[_LIVE_TESTS] = tests
+    info[_TEST_CHUNK] = wp.max(min_chunk, (tests + test_threads - wp.int64(1)) / test_threads)
 
 
 @wp.kernel
 def _write_rows(
     # in:
-    group_count: int,
     entry_key: wp.array(dtype=wp.int64),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
@@ -544,14 +797,16 @@ def _write_rows(
     check_keys: int,
     row_count: wp.array(dtype=wp.int32),
     row_end: wp.array(dtype=wp.int32),
+    info: wp.array(dtype=wp.int64),
     # out:
     row_span: wp.array(dtype=wp.vec3i),
     row_work: wp.array(dtype=wp.int64),
 ):
-    """One thread per group g: the same walk as ``_plan_rows``, writing each run of passing later
-    groups as the row (g, b_start, b_end) with its BV tests n_g x (b_end - b_start)."""
+    """One thread per live group g (none when the rows do not fit): the same walk as ``_plan_rows``,
+    writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
+    n_g x (b_end - b_start)."""
     g = wp.tid()
-    if g >= group_count:
+    if wp.int64(g) >= info[_LIVE_GROUPS] or info[_LIVE_ROWS] == wp.int64(0):
         return
     slot = row_end[g] - row_count[g]
     n_g = wp.int64(group_end[g] - group_start[g])
@@ -611,22 +866,28 @@ def _test_bounding_volumes(
     face_upper: wp.array(dtype=wp.vec3),
     faces: wp.array(dtype=wp.vec3i),
     skip_adjacent: int,
-    grid: GridArgs,
+    grid: wp.array(dtype=GridState),
+    node_bits: int,
     tables: TableArgs,
-    first_test: wp.int64,
-    end_test: wp.int64,
-    tests_per_thread: int,
+    info: wp.array(dtype=wp.int64),
     capacity: wp.int64,
     # out:
     counts: wp.array(dtype=wp.int64),
     pairs: wp.array(dtype=wp.vec2i),
 ):
-    """The paper's DecodePairsAndTest: thread tid runs BV tests first_test + tid x tests_per_thread
-    onwards, ``tests_per_thread`` of them (1 = one thread per BV test). Every thread gets the same
-    amount of work; consecutive tests walk along the work rows, so a batch needs one binary search.
+    """The paper's DecodePairsAndTest: test thread tid runs the BV tests [tid c, (tid + 1) c) of the
+    live total (c = ``info`` test chunk), one binary search for the chunk, then a walk along the
+    work rows. Emitted pairs are appended below ``capacity``; the counter keeps counting past it.
 
     Row r = (g, b_start, b_end) holds the tests of every entry of group g against the entries
     [b_start, b_end) (later groups of the same cell); every row has at least one test."""
+    total = info[_LIVE_TESTS]
+    chunk = info[_TEST_CHUNK]
+    k = wp.int64(wp.tid()) * chunk
+    if k >= total:
+        return
+    end_test = wp.min(total, k + chunk)
+    state = grid[0]
     # Arrays out of the struct once: on the CPU every struct member access copies the array header.
     entry_face = tables.entry_face
     entry_key = tables.entry_key
@@ -635,10 +896,7 @@ def _test_bounding_volumes(
     row_span = tables.row_span
     row_work = tables.row_work
     row_scan = tables.row_scan
-    k = first_test + wp.int64(wp.tid()) * wp.int64(tests_per_thread)
-    if k >= end_test:
-        return
-    r = _find_row(row_scan, tables.row_count, k)
+    r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
     q = k - (row_scan[r] - row_work[r])
     # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row r at
     # offset q is entry a = group_start + q / rest against entry b = b_start + q % rest; the walk
@@ -650,22 +908,20 @@ def _test_bounding_volumes(
     rest = wp.int64(b_end - b_start)
     entry_a = group_starts[g] + int(q // rest)
     entry_b = b_start + int(q % rest)
-    row_cell = key_cell(entry_key[group_starts[g]], grid.node_bits)
+    row_cell = key_cell(entry_key[group_starts[g]], node_bits)
     last_a = group_ends[g]
     fa = entry_face[entry_a]
     lower_a = face_lower[fa]
     upper_a = face_upper[fa]
-    for _step in range(tests_per_thread):
-        if k >= end_test:
-            break
+    while k < end_test:
         fb = entry_face[entry_b]
         # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
         lower_b = face_lower[fb]
         emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
         if emit:
             # Token position: only the cell holding the lower corner of the boxes' intersection emits.
-            token = cell_of_point(wp.max(lower_a, lower_b), grid.origin, grid.cell_size)
-            emit = linear_cell_id(token, grid.dims) == row_cell
+            token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
+            emit = linear_cell_id(token, state.dims) == row_cell
         if emit and skip_adjacent != 0:
             ta = faces[fa]
             tb = faces[fb]
@@ -693,7 +949,7 @@ def _test_bounding_volumes(
                 entry_a = group_starts[g]
                 entry_b = b_start
                 last_a = group_ends[g]
-                row_cell = key_cell(entry_key[entry_a], grid.node_bits)
+                row_cell = key_cell(entry_key[entry_a], node_bits)
             fa = entry_face[entry_a]
             lower_a = face_lower[fa]
             upper_a = face_upper[fa]
@@ -702,12 +958,39 @@ def _test_bounding_volumes(
 @wp.kernel
 def _compute_pair_keys(
     # in:
-    pairs: wp.array(dtype=wp.vec2i),
+    counts: wp.array(dtype=wp.int64),
     face_count: wp.int64,
+    pad_key: wp.int64,
     # out:
+    pairs: wp.array(dtype=wp.vec2i),
     keys: wp.array(dtype=wp.int64),
 ):
-    """One thread per emitted pair."""
+    """One thread per pair slot of the capacity: the sort key a * face_count + b of an emitted pair;
+    slots past the emitted pairs get ``pad_key`` (above every pair key) and the pair (-1, -1)."""
     i = wp.tid()
-    p = pairs[i]
-    keys[i] = wp.int64(p[0]) * face_count + wp.int64(p[1])
+    if wp.int64(i) < counts[0]:
+        p = pairs[i]
+        keys[i] = wp.int64(p[0]) * face_count + wp.int64(p[1])
+    else:
+        keys[i] = pad_key
+        pairs[i] = wp.vec2i(-1, -1)
+
+
+@wp.kernel
+def _gather_summary(
+    # in:
+    info: wp.array(dtype=wp.int64),
+    grid: wp.array(dtype=GridState),
+    counts: wp.array(dtype=wp.int64),
+    # out:
+    summary: wp.array(dtype=wp.float64),
+):
+    """A single thread: the counters, the grid dims and cell size and the pairs emitted, as float64
+    (exact below 2^53), so the sync point reads them in one copy."""
+    for k in range(_INFO_SIZE):
+        summary[k] = wp.float64(info[k])
+    state = grid[0]
+    for k in range(3):
+        summary[_INFO_SIZE + k] = wp.float64(state.dims[k])
+    summary[_INFO_SIZE + 3] = wp.float64(state.cell_size)
+    summary[_INFO_SIZE + 4] = wp.float64(counts[0])

@@ -110,7 +110,10 @@ class BroadPhaseBruteForce:
     def find_pairs(self, candidates: CandidatePairs) -> None:
         """Append every box-overlapping vertex-face and edge-edge pair to ``candidates``.
 
-        The caller resets the counters first and checks :meth:`CandidatePairs.fits` after.
+        The caller resets the counters first (:meth:`CandidatePairs.reset`) and checks
+        :meth:`CandidatePairs.fits` after (the sync point). This is a device path: the launch sizes
+        come from the array shapes (host metadata), the counts stay in ``candidates.counts`` and a
+        full buffer keeps counting on the device, so a call reads nothing back and can be captured.
         Allocates: no. Capture-safe: yes.
         """
         boxes = self.boxes

@@ -5,12 +5,18 @@ buffer                  shape, dtype            meaning
 ======================  ======================  ==============================================
 vertex_face             (capacity_vf,) vec2i    (vertex id, face id)
 edge_edge               (capacity_ee,) vec2i    (edge id a, edge id b), a < b
-counts                  (2,) int32              pairs found: [vertex-face, edge-edge]
+counts                  (2,) int32              pairs appended: [vertex-face, edge-edge]; may
+                                                exceed the capacities (an overflow)
 ======================  ======================  ==============================================
 
 Broad-phase kernels append with an atomic counter and write only below capacity, so they never write
 out of bounds; the counter keeps counting past the capacity, which tells the owner the exact size to
 grow to before running again (see :meth:`CandidatePairs.fits`).
+
+The counts stay on the device: consumers launch at the capacities and clamp with ``counts`` in their
+kernels (``min(counts[k], capacity)`` valid rows, see :func:`valid_rows` and
+:mod:`pscc.collision.contacts`, whose ``ContactArgs.counts`` is exactly :attr:`CandidatePairs.counts`).
+Only :meth:`CandidatePairs.fits` reads them to the host (the sync point).
 """
 
 from __future__ import annotations
@@ -25,9 +31,26 @@ wp.set_module_options({"enable_backward": False})
 MAX_CAPACITY: int = 2**31 - 1
 """Largest number of pairs one buffer can hold (int32 indexing)."""
 
+GROWTH: float = 1.25
+"""Factor a buffer grows by past the count that overflowed it (plus a fixed margin of ``GROWTH_MARGIN``)."""
+
+GROWTH_MARGIN: int = 1024
+"""Slots added to a grown buffer on top of ``GROWTH`` x the count."""
+
+
+@wp.func
+def valid_rows(counts: wp.array(dtype=wp.int32), kind: int, capacity: int) -> int:
+    """Rows of buffer ``kind`` (0: vertex-face, 1: edge-edge) that hold pairs: the appended count
+    clamped to ``capacity`` (and to 0 when the int32 counter wrapped)."""
+    return wp.max(0, wp.min(counts[kind], capacity))
+
 
 class CandidatePairs:
     """Candidate vertex-face and edge-edge pairs (layout in the module docstring).
+
+    Producers append on the device (:meth:`reset`, then their kernels); :meth:`fits` is the only sync
+    point. The buffers are replaced only by :meth:`fits` and :meth:`ensure`, so a graph captured after a
+    :meth:`fits` that returned True stays valid until the next one that returns False.
 
     Args:
         capacity_vf: initial number of vertex-face slots.
@@ -62,7 +85,11 @@ class CandidatePairs:
         self.counts.zero_()
 
     def fits(self) -> bool:
-        """Read the counters (a sync point) and grow the buffers when they overflowed.
+        """Sync point: read the counters to the host and grow the buffers that overflowed.
+
+        Afterwards :attr:`vertex_face_count` and :attr:`edge_edge_count` hold the counts read. A grown
+        buffer is replaced by a new one (``GROWTH`` x the count, plus ``GROWTH_MARGIN``); its contents
+        are not kept.
 
         Returns:
             True when every pair found was stored; False when a buffer was grown, in which case
@@ -70,6 +97,8 @@ class CandidatePairs:
 
         Raises:
             CapacityError: more pairs than one int32-indexed buffer can hold.
+
+        Allocates: only when a buffer grows. Capture-safe: no.
         """
         counts = self.counts.numpy().astype(np.int64)
         if np.any(counts < 0):
@@ -94,19 +123,14 @@ class CandidatePairs:
         if capacity_ee > self.capacity_ee:
             self.edge_edge = self._grown(capacity_ee, "edge_edge")
 
-    def set_counts(self, vertex_face_count: int, edge_edge_count: int) -> None:
-        """Record pair counts known on the host (for producers that size their output exactly)."""
-        self._host_counts = np.array([vertex_face_count, edge_edge_count], dtype=np.int64)
-        self.counts.assign(np.array([vertex_face_count, edge_edge_count], dtype=np.int32))
-
     @property
     def vertex_face_count(self) -> int:
-        """Vertex-face pairs found by the last run (valid after :meth:`fits`)."""
+        """Vertex-face pairs found by the last run, as read by the last :meth:`fits` (host value)."""
         return int(self._host_counts[0])
 
     @property
     def edge_edge_count(self) -> int:
-        """Edge-edge pairs found by the last run (valid after :meth:`fits`)."""
+        """Edge-edge pairs found by the last run, as read by the last :meth:`fits` (host value)."""
         return int(self._host_counts[1])
 
     def _grown(self, needed: int, name: str) -> wp.array:
@@ -115,5 +139,5 @@ class CandidatePairs:
                 f"{name} candidate buffer: {needed} pairs exceed {MAX_CAPACITY}; "
                 "reduce the thickness or split the scene"
             )
-        size = min(MAX_CAPACITY, int(needed * 1.25) + 1024)
+        size = min(MAX_CAPACITY, int(needed * GROWTH) + GROWTH_MARGIN)
         return wp.empty(size, dtype=wp.vec2i, device=self.device)

@@ -15,6 +15,7 @@ tolerance band documented in :mod:`pscc.tolerances` (``docs/ccd.md``).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,6 +29,7 @@ from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.brute_force import BroadPhaseBruteForce
 from pscc.collision.bvh import MaterialBvh
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.contacts import DeviceContacts
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
@@ -151,8 +153,6 @@ class CollisionDetector:
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
         self._last_ccd_thickness: float | None = None
-        self._previous_t0: wp.array | None = None
-        self._previous_t1: wp.array | None = None
         self.topology: MeshTopology | None = None
         self.front: NormalConeFront | None = None
         self.bvh: MaterialBvh | None = None
@@ -179,10 +179,16 @@ class CollisionDetector:
         self._object_ids = wp.array(mesh.object_ids, dtype=wp.int32, device=device)
         self._positions_t0 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self._positions_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
+        # Positions of the previous CCD (the re-check compares against them); NaN: test every pair.
+        self._previous_t0 = wp.full(vertex_count, wp.vec3(math.nan, math.nan, math.nan), dtype=wp.vec3,
+                                    device=device)
+        self._previous_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
         self._feature_boxes = self.boxes.as_struct()
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
+        self.narrow.mark_moved(self._previous_t0, self._previous_t0, self._previous_t1, self._previous_t1)
+        self.narrow.reserve(self.candidates)
         if self.method == "brute-force":
             used = (np.diff(self.topology.vertex_face_offsets) > 0).astype(np.int32)
             self._vertex_used = wp.array(used, dtype=wp.int32, device=device)
@@ -275,71 +281,212 @@ class CollisionDetector:
         return self._broad(x0, x1, h)
 
     def _broad(self, x0: np.ndarray, x1: np.ndarray | None, h: float) -> dict[str, Any]:
-        """Broad phase on validated float32 positions (see :meth:`broad_phase`)."""
-        seconds: dict[str, float] = {}
-        mark = time.perf_counter()
+        """Broad phase on validated float32 host positions: upload, the device path, then the
+        capacity check (re-run while a buffer had to grow) and the stats (see :meth:`broad_phase`)."""
         self._positions_t0.assign(x0)
-        positions_t1 = self._positions_t0
+        positions_t1 = None
         if x1 is not None:
             self._positions_t1.assign(x1)
             positions_t1 = self._positions_t1
-        self.boxes.compute(self._positions_t0, positions_t1, h)
-        wp.synchronize_device(self.device)
-        seconds["boxes"] = time.perf_counter() - mark
-        stats: dict[str, Any] = {"front_size": 0}
-        if self.method == "brute-force":
+        while True:
+            seconds: dict[str, float] = {}
+            self._broad_device(self._positions_t0, positions_t1, h, seconds)
             mark = time.perf_counter()
-            while True:
-                self.candidates.reset()
-                self.brute_force.find_pairs(self.candidates)
-                if self.candidates.fits():
-                    break
-            seconds["broad_phase"] = time.perf_counter() - mark
-            m = self._faces_np.shape[0]
+            fits = self.check_capacity()
+            seconds["capacity_check"] = time.perf_counter() - mark
+            if fits:
+                break
+        stats = self.broad_phase_stats()
+        stats["seconds"] = seconds
+        self._broad_stats = stats
+        self._last_ccd_thickness = None  # the candidates changed: no result to reuse
+        return stats
+
+    # ------------------------------------------------------------------ device path
+
+    def _device_positions(self, value: Any, name: str) -> wp.array:
+        """A device position array accepted as is (shape, dtype and device checked on the host only)."""
+        if self.topology is None:
+            raise InputError("argument", "detector", "is not prepared",
+                             "call prepare(positions) once before the device-array methods")
+        n = self._vertex_count
+        if not isinstance(value, wp.array) or value.dtype != wp.vec3 or value.ndim != 1 or value.shape[0] != n:
+            described = (f"a {value.shape} array of {wp.types.type_repr(value.dtype)}" if isinstance(value, wp.array)
+                         else type(value).__name__)
+            raise InputError("argument", name, f"got {described}", f"pass a ({n},) wp.array of vec3")
+        if value.device != self.device:
+            raise InputError("argument", name, f"array is on {value.device}, the detector on {self.device}",
+                             f"copy it to {self.device} first")
+        if not value.is_contiguous:
+            raise InputError("argument", name, "array is not contiguous", "pass a contiguous array")
+        return value
+
+    def broad_phase_device(self, positions_t0: wp.array, positions_t1: wp.array | None = None,
+                           thickness: float = 0.0) -> None:
+        """The broad phase of :meth:`broad_phase` on device arrays; the candidates stay on the device.
+
+        The detector must be prepared (:meth:`prepare`). Positions are not range-checked here (that
+        would be a host read): the caller keeps them finite and within
+        :data:`pscc.tolerances.MAX_COORDINATE`. Buffers that are too small keep counting on the
+        device; :meth:`check_capacity` (a sync point) grows them and says whether to run again.
+
+        Args:
+            positions_t0: (vertex_count,) ``wp.vec3`` on the detector's device (start of the step).
+            positions_t1: end of the step (CCD), or ``None`` (DCD).
+            thickness: distance the boxes are grown by, in [0, MAX_THICKNESS].
+
+        Raises:
+            InputError: the detector is not prepared, or arrays of the wrong shape, dtype or device.
+
+        Allocates: no. Capture-safe: yes (after a call that :meth:`check_capacity` accepted).
+        """
+        self._broad_device(positions_t0, positions_t1, thickness, None)
+
+    def _broad_device(self, positions_t0: wp.array, positions_t1: wp.array | None, thickness: float,
+                      seconds: dict[str, float] | None) -> None:
+        """:meth:`broad_phase_device`; with a ``seconds`` dict, synchronizes after every stage and adds
+        its time there (the host path's per-stage timing)."""
+        x0 = self._device_positions(positions_t0, "positions_t0")
+        x1 = None if positions_t1 is None else self._device_positions(positions_t1, "positions_t1")
+        h = check_thickness(thickness, "thickness")
+        mark = [time.perf_counter()]
+
+        def lap(stage: str) -> None:
+            if seconds is not None:
+                wp.synchronize_device(self.device)
+                now = time.perf_counter()
+                seconds[stage] = seconds.get(stage, 0.0) + now - mark[0]
+                mark[0] = now
+
+        self.boxes.compute(x0, x1 if x1 is not None else x0, h)
+        self.candidates.reset()
+        lap("boxes")
+        if self.method == "brute-force":
+            self.brute_force.find_pairs(self.candidates)
+            lap("broad_phase")
+        else:
+            node_id = None
+            if self.method == "pscc":
+                node_id = self.front.update(x0, x1)
+                lap("front")
+            self.spatial_hash.find_pairs_device(
+                self.boxes.face_lower, self.boxes.face_upper, node_id,
+                positions_t0=x0, positions_t1=x1, half_distance=0.5 * h,
+                node_id_bound=self.bvh.node_count if node_id is not None else None,
+                face_order=self.bvh.arrays.face_order if node_id is not None else None)
+            lap("spatial_hash")
+            self.feature_pairs.extract_device(self.spatial_hash.pairs, self.spatial_hash.counts, self.candidates,
+                                              x0, x1, h, self._object_ids, self._feature_boxes)
+            lap("feature_pairs")
+        # New candidates: the next CCD re-check must test every pair (NaN differs from every position).
+        self._previous_t0.fill_(wp.vec3(math.nan, math.nan, math.nan))
+        self._broad_mode = "ccd" if x1 is not None else "dcd"
+        self._broad_thickness = h
+        self._last_ccd_thickness = None
+
+    def check_capacity(self) -> bool:
+        """Sync point: read the device counters of the last device call, grow what overflowed.
+
+        Returns:
+            True when every buffer held its data; False when one grew, and the broad phase (and the
+            narrow phases after it) must run again.
+
+        Raises:
+            InputError: a deferred input problem found on the device (boxes with NaN/Inf).
+            CapacityError: more pairs than int32 buffers can hold.
+
+        Allocates: when a buffer grows. Capture-safe: no.
+        """
+        fits = True
+        if self.method != "brute-force" and not self.spatial_hash.check_capacity():
+            fits = False
+        if not self.candidates.fits():
+            fits = False
+        self.narrow.reserve(self.candidates)
+        return fits
+
+    def front_count(self) -> wp.array | None:
+        """The test front's size as a (1,) int32 device array (``pscc`` only, else ``None``)."""
+        return self.front.front_count if self.front is not None else None
+
+    def overflow_counters(self) -> list[tuple[wp.array, int, int]]:
+        """``(device counter, index, capacity)`` triples of the broad phase's internal buffers: a
+        counter above its capacity means the last device call overflowed (the candidate buffers are
+        checked separately, through :attr:`candidates`). Capacities change only in
+        :meth:`check_capacity`."""
+        if self.method == "brute-force":
+            return []
+        return self.spatial_hash.overflow_counters()
+
+    def broad_phase_stats(self) -> dict[str, Any]:
+        """Stats of the last broad phase (keys of :meth:`broad_phase`'s result but ``seconds``).
+
+        A sync point (reads device counters); valid after :meth:`check_capacity` accepted the call.
+        Allocates: yes (host copies). Capture-safe: no.
+        """
+        stats: dict[str, Any] = {"front_size": 0}
+        m = self._faces_np.shape[0]
+        if self.method == "brute-force":
             # Faces per distinct object id (ids need not be contiguous: no table of max id + 1 rows).
             _, sizes = np.unique(self.object_ids, return_counts=True)
             sizes = sizes.astype(np.int64)
             self_pairs = int((sizes * (sizes - 1) // 2).sum())
-            stats.update(bv_tests=self.brute_force.bounding_volume_tests(x0.shape[0], m, self.topology.edge_count),
+            stats.update(bv_tests=self.brute_force.bounding_volume_tests(self._vertex_count, m,
+                                                                         self.topology.edge_count),
                          triangle_pairs=m * (m - 1) // 2, self_triangle_pairs=self_pairs,
                          inter_triangle_pairs=m * (m - 1) // 2 - self_pairs)
         else:
-            node_id = None
-            x1_device = self._positions_t1 if x1 is not None else None
             if self.method == "pscc":
-                mark = time.perf_counter()
-                node_id = self.front.update(self._positions_t0, x1_device)
-                wp.synchronize_device(self.device)
-                seconds["front"] = time.perf_counter() - mark
-                stats["front_size"] = self.front.front_size
-                stats["front"] = dict(self.front.stats)
-            mark = time.perf_counter()
-            pairs, box_pairs = self.spatial_hash.find_pairs(
-                self.boxes.face_lower, self.boxes.face_upper, node_id,
-                positions_t0=self._positions_t0, positions_t1=x1_device, half_distance=0.5 * h,
-                node_id_bound=self.bvh.node_count if node_id is not None else None,
-                face_order=self.bvh.arrays.face_order if node_id is not None else None)
-            seconds["spatial_hash"] = time.perf_counter() - mark
-            mark = time.perf_counter()
-            self.feature_pairs.extract(pairs, box_pairs, self.candidates, self._positions_t0, x1_device, h,
-                                       self._object_ids, self._feature_boxes)
-            self_pairs = self.feature_pairs.self_pairs
-            seconds["feature_pairs"] = time.perf_counter() - mark
+                front_stats = dict(self.front.stats)
+                stats["front_size"] = int(front_stats["front_size"])
+                stats["front"] = front_stats
             hash_stats = self.spatial_hash.stats
-            stats.update(bv_tests=int(hash_stats.bv_tests), triangle_pairs=int(box_pairs),
-                         self_triangle_pairs=self_pairs, inter_triangle_pairs=int(box_pairs) - self_pairs,
-                         kept_triangle_pairs=self.feature_pairs.kept_pairs,
+            kept, _, self_pairs = (int(v) for v in self.feature_pairs.pair_stats.numpy()[:3])
+            box_pairs = int(hash_stats.triangle_pairs)
+            stats.update(bv_tests=int(hash_stats.bv_tests), triangle_pairs=box_pairs,
+                         self_triangle_pairs=self_pairs, inter_triangle_pairs=box_pairs - self_pairs,
+                         kept_triangle_pairs=kept,
                          grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
                                "face_tests": int(hash_stats.face_tests), "slab_tests": int(hash_stats.slab_tests),
                                "mean_cells_per_face": float(hash_stats.mean_cells_per_face)})
         stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
-        stats["seconds"] = seconds
-        self._broad_mode = "ccd" if x1 is not None else "dcd"
-        self._broad_thickness = h
-        self._broad_stats = stats
-        self._last_ccd_thickness = None  # the candidates changed: no result to reuse
         return stats
+
+    def narrow_phase_device(self, positions_t0: wp.array, positions_t1: wp.array | None = None,
+                            thickness: float = 0.0, *, recheck: bool = False) -> DeviceContacts:
+        """The narrow phase of :meth:`narrow_phase` on device arrays; the result stays on the device.
+
+        Tests the candidates of the last broad phase (device or host path). With ``recheck`` (CCD),
+        only candidates with a vertex whose start or end position changed since the previous CCD of
+        this broad phase are tested again (the first CCD after a broad phase tests every pair). The
+        caller keeps the thickness at most the broad phase's, and CCD after a CCD broad phase.
+
+        Returns:
+            The :class:`DeviceContacts` view of the candidate rows, their times of impact and
+            ``hit_counts`` (all on the device, valid until the next call).
+
+        Raises:
+            InputError: the detector is not prepared, no broad phase has run, or bad arrays.
+
+        Allocates: no. Capture-safe: yes.
+        """
+        if self._broad_mode is None:
+            raise InputError("argument", "narrow_phase_device", "no broad phase has run", "call broad_phase() first")
+        x0 = self._device_positions(positions_t0, "positions_t0")
+        x1 = None if positions_t1 is None else self._device_positions(positions_t1, "positions_t1")
+        h = check_thickness(thickness, "thickness")
+        moved = None
+        if x1 is not None and recheck:
+            moved = self.narrow.mark_moved(self._previous_t0, x0, self._previous_t1, x1)
+        self.narrow.run_device(self.candidates, x0, x1 if x1 is not None else x0, h, moved=moved)
+        if x1 is not None:
+            wp.copy(self._previous_t0, x0)
+            wp.copy(self._previous_t1, x1)
+        else:
+            # The DCD replaced the times of impact: a later CCD re-check must test every pair.
+            self._previous_t0.fill_(wp.vec3(math.nan, math.nan, math.nan))
+        return self.narrow.contacts(self.candidates, continuous=x1 is not None, thickness=h)
 
     def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0,
                      recheck: bool = False) -> CollisionResult:
@@ -371,34 +518,21 @@ class CollisionDetector:
             raise InputError("argument", "thickness",
                              f"{h:g} exceeds the broad phase's thickness {self._broad_thickness:g}",
                              "run broad_phase() with at least the thickness the narrow phase uses")
-        if recheck and x1 is not None and self._last_ccd_thickness == h:
-            mark = time.perf_counter()
-            if self._previous_t0 is None or self._previous_t0.shape[0] != x0.shape[0]:
-                self._previous_t0 = wp.empty_like(self._positions_t0)
-                self._previous_t1 = wp.empty_like(self._positions_t1)
-            wp.copy(self._previous_t0, self._positions_t0)
-            wp.copy(self._previous_t1, self._positions_t1)
-            self._positions_t0.assign(x0)
-            self._positions_t1.assign(x1)
-            moved = self.narrow.mark_moved(self._previous_t0, self._positions_t0, self._previous_t1,
-                                           self._positions_t1)
-            marking = time.perf_counter() - mark
-            result = self._narrow(x0, x1, h, upload=False, moved=moved)
-            result.stats["narrow_phase"] += marking
-            return result
-        return self._narrow(x0, x1, h, upload=True)
+        return self._narrow(x0, x1, h, upload=True, recheck=recheck and x1 is not None
+                            and self._last_ccd_thickness == h)
 
     def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool,
-                moved: wp.array | None = None) -> CollisionResult:
-        """Narrow phase on the current candidates; ``upload=False`` reuses the positions already on
-        the device; ``moved`` marks the vertices to test again (CCD only)."""
+                recheck: bool = False) -> CollisionResult:
+        """Narrow phase on the current candidates through the device path, then the host copy;
+        ``upload=False`` reuses the positions already on the device; ``recheck``: see
+        :meth:`narrow_phase`."""
         mark = time.perf_counter()
         if upload:
             self._positions_t0.assign(x0)
             if x1 is not None:
                 self._positions_t1.assign(x1)
-        positions_t1 = self._positions_t1 if x1 is not None else self._positions_t0
-        self.narrow.run(self.candidates, self._positions_t0, positions_t1, h, moved=moved)
+        self.narrow_phase_device(self._positions_t0, self._positions_t1 if x1 is not None else None, h,
+                                 recheck=recheck)
         self._last_ccd_thickness = h if x1 is not None else None
         wp.synchronize_device(self.device)
         narrow_seconds = time.perf_counter() - mark
@@ -456,8 +590,7 @@ class CollisionDetector:
             + self._positions_t0.capacity + self._positions_t1.capacity,
             "boxes": self.boxes.device_bytes,
             "candidates": self.candidates.device_bytes,
-            "narrow_phase": self.narrow.device_bytes + sum(
-                a.capacity for a in (self._previous_t0, self._previous_t1) if a is not None),
+            "narrow_phase": self.narrow.device_bytes + self._previous_t0.capacity + self._previous_t1.capacity,
         }
         if self.method != "brute-force":
             sizes["spatial_hash"] = int(sum(self.spatial_hash.device_bytes.values()))

@@ -17,10 +17,18 @@ owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge
 One thread per triangle pair first counts its feature pairs whose own boxes overlap; a pair with
 any then meets the supporting-plane test of :mod:`pscc.collision.pair_filter` (the costlier test,
 so it runs only where it can save narrow-phase work) and, unless a plane separates its triangles,
-appends its feature pairs to the candidate buffers with one atomic add per kind. A buffer that
-overflows is grown to the exact total and the pass runs again. The order of the candidates follows
-the atomic appends (fixed on the CPU, where the threads of a launch run in order); the detector
-sorts its results, so they do not depend on it.
+appends its feature pairs to the candidate buffers with one atomic add per kind. The pass is launched
+at the capacity of the triangle-pair buffer and reads the number of valid pairs from a device counter
+(:meth:`FeaturePairs.extract_device`), so it reads nothing back and can be captured. A buffer that
+overflows keeps counting on the device; :meth:`CandidatePairs.fits` grows it and the pass runs again
+(:meth:`FeaturePairs.extract` does both). The order of the candidates follows the atomic appends
+(fixed on the CPU, where the threads of a launch run in order); the detector sorts its results, so
+they do not depend on it.
+
+========================  ===================  ==============================================
+pair_stats                (3,) int32           [kept pairs, kept within one object, all pairs
+                                               within one object] of the last pass
+========================  ===================  ==============================================
 """
 
 from __future__ import annotations
@@ -105,6 +113,7 @@ def _extract_features(
     owned_vertex_bits: wp.array(dtype=wp.int32),
     owned_edge_bits: wp.array(dtype=wp.int32),
     triangle_pairs: wp.array(dtype=wp.vec2i),
+    pair_counts: wp.array(dtype=wp.int64),
     planes: PlaneTestArgs,
     boxes: PrimitiveBoxArgs,
     # out:
@@ -113,11 +122,14 @@ def _extract_features(
     edge_edge_out: wp.array(dtype=wp.vec2i),
     pair_stats: wp.array(dtype=wp.int32),
 ):
-    """One thread per triangle pair: find its feature pairs whose boxes overlap (as bit masks, each
-    box loaded once); if there are any and no supporting plane separates the triangles, append them
-    (written only below each buffer's capacity; the counters keep counting) and count the pair as
-    kept. ``pair_stats`` = [kept, kept within one object, all pairs within one object]."""
+    """One thread per triangle-pair slot (threads past ``min(pair_counts[0], slots)`` return): find
+    its feature pairs whose boxes overlap (as bit masks, each box loaded once); if there are any and
+    no supporting plane separates the triangles, append them (written only below each buffer's
+    capacity; the counters keep counting) and count the pair as kept. ``pair_stats`` = [kept, kept
+    within one object, all pairs within one object]."""
     i = wp.tid()
+    if wp.int64(i) >= wp.min(pair_counts[0], wp.int64(triangle_pairs.shape[0])):
+        return
     pair = triangle_pairs[i]
     a = pair[0]
     b = pair[1]
@@ -168,33 +180,42 @@ def _extract_features(
     wp.atomic_add(pair_stats, 0, 1)
     if same_object:
         wp.atomic_add(pair_stats, 1, 1)
+    # Every row below the capacity is written, also when the buffer overflows part-way through this
+    # pair's rows: readers clamp the count to the capacity and read every row below it.
     if vf > 0:
         slot = wp.atomic_add(counts, 0, vf)
-        if slot + vf <= vertex_face_out.shape[0]:
-            tri_a = faces[a]
-            tri_b = faces[b]
-            for k in range(3):
-                if (mask_ab >> k) & 1:
+        capacity = vertex_face_out.shape[0]
+        tri_a = faces[a]
+        tri_b = faces[b]
+        for k in range(3):
+            if (mask_ab >> k) & 1:
+                if slot < capacity:
                     vertex_face_out[slot] = wp.vec2i(tri_a[k], b)
-                    slot += 1
-            for k in range(3):
-                if (mask_ba >> k) & 1:
+                slot += 1
+        for k in range(3):
+            if (mask_ba >> k) & 1:
+                if slot < capacity:
                     vertex_face_out[slot] = wp.vec2i(tri_b[k], a)
-                    slot += 1
+                slot += 1
     if ee > 0:
         slot = wp.atomic_add(counts, 1, ee)
-        if slot + ee <= edge_edge_out.shape[0]:
-            for j in range(3):
-                for k in range(3):
-                    if (edge_mask >> (3 * j + k)) & 1:
+        capacity = edge_edge_out.shape[0]
+        for j in range(3):
+            for k in range(3):
+                if (edge_mask >> (3 * j + k)) & 1:
+                    if slot < capacity:
                         ea = ids_a[j]
                         eb = ids_b[k]
                         edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
-                        slot += 1
+                    slot += 1
 
 
 class FeaturePairs:
     """Turns candidate triangle pairs into candidate feature pairs (layout in the module docstring).
+
+    :meth:`extract_device` is the device path (no host read, capturable); :meth:`extract` is the host
+    API built on it (device path, then :meth:`CandidatePairs.fits`, re-run while a buffer grew, then
+    the stats read back).
 
     Args:
         faces: (face_count, 3) int32 host faces.
@@ -216,6 +237,8 @@ class FeaturePairs:
         self.faces = faces_device
         self.edges = edges_device
         self.pair_stats = wp.zeros(3, dtype=wp.int32, device=device)
+        # The host API's pair count, handed to the device path like a broad phase's counter.
+        self._host_pair_count = wp.zeros(1, dtype=wp.int64, device=device)
         self.planes = PlaneTestArgs()
         self.planes.factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
         self.planes.params = ccd_parameters()
@@ -228,7 +251,56 @@ class FeaturePairs:
     def device_bytes(self) -> int:
         """Bytes held on the device (ownership tables)."""
         return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity + self.face_edges.capacity
-                + self.pair_stats.capacity)
+                + self.pair_stats.capacity + self._host_pair_count.capacity)
+
+    def extract_device(
+        self,
+        triangle_pairs: wp.array,
+        pair_counts: wp.array,
+        candidates: CandidatePairs,
+        positions_t0: wp.array,
+        positions_t1: wp.array | None,
+        thickness: float,
+        object_ids: wp.array,
+        boxes: PrimitiveBoxArgs,
+    ) -> None:
+        """Device path of :meth:`extract`: reset ``candidates`` and ``pair_stats``, then append the
+        feature pairs of the valid triangle pairs, reading their number on the device.
+
+        One launch of ``triangle_pairs.shape[0]`` threads; the valid pairs are the first
+        ``min(pair_counts[0], triangle_pairs.shape[0])``. Candidate buffers that are too small keep
+        counting (``candidates.counts``); the owner calls :meth:`CandidatePairs.fits` (a sync point)
+        and runs again when it returns False. ``pair_stats`` holds the kept / self counters on the
+        device.
+
+        Args:
+            triangle_pairs: (slots,) ``wp.vec2i`` candidate triangle pairs (face a, face b).
+            pair_counts: int64 device array; element 0 is the number of pairs written (it may
+                exceed ``slots``, e.g. a broad phase's overflowed counter).
+            candidates: output buffers.
+            positions_t0: (vertex_count,) ``wp.vec3`` positions (DCD) or start of the step (CCD).
+            positions_t1: end of the step for CCD, else None.
+            thickness: the distance the broad-phase boxes were grown by (length units).
+            object_ids: (face_count,) int32 object of each face, for the self / inter pair counts.
+            boxes: the primitive boxes of the same call; feature pairs whose boxes miss are skipped.
+
+        Allocates: no. Capture-safe: yes.
+        """
+        planes = self.planes
+        planes.positions_t0 = positions_t0
+        planes.positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
+        planes.object_ids = object_ids
+        planes.swept = 1 if positions_t1 is not None else 0
+        planes.thickness = float(thickness)
+        candidates.reset()
+        self.pair_stats.zero_()
+        slots = triangle_pairs.shape[0]
+        if slots == 0:
+            return
+        wp.launch(_extract_features, dim=slots, device=self.device,
+                  inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits, self.owned_edge_bits,
+                          triangle_pairs, pair_counts, planes, boxes],
+                  outputs=[candidates.counts, candidates.vertex_face, candidates.edge_edge, self.pair_stats])
 
     def extract(
         self,
@@ -255,29 +327,21 @@ class FeaturePairs:
             object_ids: (face_count,) object of each face, for the self / inter pair counts.
             boxes: the primitive boxes of the same call; feature pairs whose boxes miss are skipped.
 
-        Afterwards ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that gave at least
-        one feature pair (boxes overlap, no separating supporting plane), all and within one object,
+        Runs :meth:`extract_device` until :meth:`CandidatePairs.fits` accepts it. Afterwards
+        ``kept_pairs`` and ``kept_self_pairs`` hold the triangle pairs that gave at least one feature
+        pair (boxes overlap, no separating supporting plane), all and within one object,
         ``self_pairs`` the given pairs within one object, and ``reruns`` the passes repeated after a
         buffer grew. Reads the totals to the host (a sync point).
         Allocates: only when ``candidates`` must grow. Capture-safe: no.
         """
-        n = int(pair_count)
-        planes = self.planes
-        planes.positions_t0 = positions_t0
-        planes.positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
-        planes.object_ids = object_ids
-        planes.swept = 1 if positions_t1 is not None else 0
-        planes.thickness = float(thickness)
+        n = max(0, min(int(pair_count), triangle_pairs.shape[0]))
+        self._host_pair_count.fill_(n)
+        # Launch over the valid pairs only (the count guards the rest; Warp cannot slice to length 0).
+        pairs = triangle_pairs[:n] if 0 < n < triangle_pairs.shape[0] else triangle_pairs
         self.reruns = 0
         while True:
-            candidates.reset()
-            self.pair_stats.zero_()
-            if n > 0:
-                wp.launch(_extract_features, dim=n, device=self.device,
-                          inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits,
-                                  self.owned_edge_bits, triangle_pairs, planes, boxes],
-                          outputs=[candidates.counts, candidates.vertex_face, candidates.edge_edge,
-                                   self.pair_stats])
+            self.extract_device(pairs, self._host_pair_count, candidates, positions_t0, positions_t1, thickness,
+                                object_ids, boxes)
             if candidates.fits():
                 break
             self.reruns += 1

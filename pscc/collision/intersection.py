@@ -16,8 +16,15 @@ Pipeline of :meth:`IntersectionCheck.find`:
    skipping edges that share a vertex with that face. Edge ``e`` is tested only from its owner,
    the lowest-id face containing it (``edge_owner``), so each (edge, face) pair is tested and
    reported once (an edge inside a face's box makes every face of that edge overlap the box);
-4. hits are appended with an atomic counter to a buffer that grows to the exact count and
-   re-runs the test pass when it overflows (no silent loss), then sorted on the host.
+4. hits are appended with an atomic counter that keeps counting past the buffer (no silent loss),
+   and the hits that involve the cloth are counted on the device (``crossing_count``); the host
+   API grows the buffer to the exact count and runs again when it overflowed, then sorts the hits.
+
+:meth:`IntersectionCheck.count_device` is that pipeline with no host read, synchronization,
+allocation or upload (the test pass runs at the hash's pair capacity and stops at its device
+count), so it can be recorded into a graph; :meth:`IntersectionCheck.check_capacity` is its sync
+point. :meth:`~IntersectionCheck.find` and :meth:`~IntersectionCheck.has_intersections` are both,
+repeated until the buffers fit.
 
 Device buffers of :class:`IntersectionCheck` (m faces, n vertices, E edges, H hit slots):
 
@@ -33,11 +40,12 @@ face_lower / face_upper  (m,) vec3             exact face boxes
 hits                     (H,) vec2i            reported (edge id, face id), unsorted
 hit_kind / hit_bound     (H,) int32 / float32  1 certain crossing, 2 near; distance bound Delta
 hit_count                (1,) int64            hits found (may exceed H: then H grows)
+crossing_count           (1,) int32            hits that involve the cloth (``count_device``)
 =======================  ====================  =================================================
 
-Sync points of :meth:`IntersectionCheck.find` (host reads of device data): the four of
-:meth:`SpatialHash.find_pairs` (scene bounds, entry count, table counts, pair count), then the hit
-count, then the copy of the hits to the host.
+Sync points of :meth:`IntersectionCheck.find` (host reads of device data): one per run in
+:meth:`IntersectionCheck.check_capacity` (the hash's counters and the hit count), then the copy of
+the hits to the host.
 """
 
 from __future__ import annotations
@@ -102,40 +110,67 @@ def _compute_exact_face_boxes(
     upper_out[i] = wp.max(wp.max(a, b), c)
 
 
+@wp.struct
+class EdgeTopologyArgs:
+    """The faces and edges the test pass reads (layout in the module docstring)."""
+
+    faces: wp.array(dtype=wp.vec3i)
+    face_edges: wp.array(dtype=wp.vec3i)
+    edges: wp.array(dtype=wp.vec2i)
+    edge_owner: wp.array(dtype=wp.int32)
+
+
+@wp.kernel
+def _reset_hit_counts(
+    # out:
+    hit_count: wp.array(dtype=wp.int64),
+    crossing_count: wp.array(dtype=wp.int32),
+):
+    """A single thread: zeroes the counters of a call (a kernel, so a graph replays it)."""
+    hit_count[0] = wp.int64(0)
+    crossing_count[0] = 0
+
+
 @wp.kernel
 def _test_face_pairs(
     # in:
-    faces: wp.array(dtype=wp.vec3i),
-    face_edges: wp.array(dtype=wp.vec3i),
-    edges: wp.array(dtype=wp.vec2i),
-    edge_owner: wp.array(dtype=wp.int32),
+    topology: EdgeTopologyArgs,
     positions: wp.array(dtype=wp.vec3),
     face_pairs: wp.array(dtype=wp.vec2i),
+    pair_counts: wp.array(dtype=wp.int64),
+    cloth_face_count: int,
     capacity: int,
     # out:
     hit_count: wp.array(dtype=wp.int64),
+    crossing_count: wp.array(dtype=wp.int32),
     hits: wp.array(dtype=wp.vec2i),
     hit_kind: wp.array(dtype=wp.int32),
     hit_bound: wp.array(dtype=float),
 ):
-    """One thread per face pair: owned edges of each face against the other face."""
+    """One thread per face pair slot (the first min(pair_counts[0], slots) are live): owned edges of
+    each face against the other face. Every hit is counted (past ``capacity`` too); a hit whose edge
+    owner or face is below ``cloth_face_count`` also counts as a cloth crossing."""
     i = wp.tid()
+    if wp.int64(i) >= pair_counts[0]:
+        return
     pair = face_pairs[i]
     for side in range(2):
         g = pair[side]
         f = pair[1 - side]
-        fv = faces[f]
-        fe = face_edges[g]
+        fv = topology.faces[f]
+        fe = topology.face_edges[g]
         for k in range(3):
             e = fe[k]
-            if edge_owner[e] != g:
+            if topology.edge_owner[e] != g:
                 continue
-            ev = edges[e]
+            ev = topology.edges[e]
             if ev[0] == fv[0] or ev[0] == fv[1] or ev[0] == fv[2] or ev[1] == fv[0] or ev[1] == fv[1] or ev[1] == fv[2]:
                 continue
             r = segment_triangle_classify(positions[ev[0]], positions[ev[1]],
                                           positions[fv[0]], positions[fv[1]], positions[fv[2]])
             if r[0] > 0.5:
+                if g < cloth_face_count or f < cloth_face_count:
+                    wp.atomic_add(crossing_count, 0, 1)
                 slot = wp.atomic_add(hit_count, 0, wp.int64(1))
                 if slot < wp.int64(capacity):
                     s = int(slot)
@@ -206,7 +241,15 @@ class IntersectionCheck:
         self.face_lower = wp.empty(m, dtype=wp.vec3, device=dev)
         self.face_upper = wp.empty(m, dtype=wp.vec3, device=dev)
         self.hit_count = wp.zeros(1, dtype=wp.int64, device=dev)
+        self.crossing_count = wp.zeros(1, dtype=wp.int32, device=dev)
+        self._topology = EdgeTopologyArgs()
+        self._topology.faces = self.faces
+        self._topology.face_edges = self.face_edges
+        self._topology.edges = self.edges
+        self._topology.edge_owner = self.edge_owner
         self._allocate_hits(int(hit_capacity))
+        self._hit_total = 0
+        self._hit_reruns = 0
         self.spatial_hash = SpatialHash(m, dev, cell_size_factor, sort_pairs=False)
         self.stats = IntersectionStats()
         self._kinds = np.zeros(0, dtype=np.int32)
@@ -230,17 +273,9 @@ class IntersectionCheck:
 
     def _upload(self, positions: object) -> wp.array:
         """Validated device positions: a matching ``wp.array`` as is, anything else copied."""
-        n = self.vertex_count
         if isinstance(positions, wp.array):
-            if positions.dtype != wp.vec3 or positions.ndim != 1 or positions.shape[0] != n:
-                raise InputError("argument", "positions", f"got a {positions.shape} array of "
-                                 f"{wp.types.type_repr(positions.dtype)}", f"pass a ({n},) wp.array of vec3")
-            if positions.device != self.device:
-                raise InputError("argument", "positions", f"array is on {positions.device}, the check on "
-                                 f"{self.device}", f"copy it to {self.device} first")
-            if not positions.is_contiguous:
-                raise InputError("argument", "positions", "array is not contiguous", "pass a contiguous array")
-            return positions
+            return self._device_positions(positions)
+        n = self.vertex_count
         host = check_points(positions, "positions", shape_tail=(3,))
         if host.shape[0] != n:
             raise InputError("argument", "positions", f"{host.shape[0]} rows for {n} vertices",
@@ -249,34 +284,117 @@ class IntersectionCheck:
             self.positions.assign(host)
         return self.positions
 
-    def _run(self, positions: object) -> int:
-        """Broad phase and test pass; returns the exact hit count (sync points in the module docstring)."""
-        self.stats = IntersectionStats()
-        points = self._upload(positions)
+    def overflow_counters(self) -> list[tuple[wp.array, int, int]]:
+        """``(device counter, index, capacity)`` triples of the last :meth:`count_device`: a counter
+        above its capacity means :meth:`check_capacity` must grow a buffer (see
+        :meth:`SpatialHash.overflow_counters`)."""
+        return [*self.spatial_hash.overflow_counters(), (self.hit_count, 0, self.hit_capacity)]
+
+    def count_device(self, positions: wp.array, cloth_face_count: int | None = None) -> None:
+        """Boxes, the hash's device path and the test pass, with nothing read back: leaves in
+        ``crossing_count[0]`` (int32) the number of reported (edge, face) pairs, and the hits in
+        ``hits`` / ``hit_kind`` / ``hit_bound`` (the first min(hit_count[0], hit_capacity) rows).
+
+        Buffers that are too small keep counting on the device; :meth:`check_capacity` (a sync point)
+        grows them and says whether to run again. The positions are not checked for NaN/Inf here (a
+        host read): boxes holding them are reported by :meth:`check_capacity`.
+
+        Args:
+            positions: (vertex_count,) ``wp.vec3`` on the check's device.
+            cloth_face_count: count only the pairs that involve the cloth, the faces below this id
+                (the edge's owner face or the face is a cloth face; obstacle-obstacle contact is
+                ignored). ``None``: count every pair.
+
+        Raises:
+            InputError: positions of the wrong type, shape, dtype or device; a bad cloth face count.
+
+        Allocates: no. Capture-safe: yes (with the arrays of the recorded call; after
+        :meth:`check_capacity` grows a buffer, record again).
+        """
+        points = self._device_positions(positions)
         m = self.face_count
-        if m < 2:
-            return 0
+        if cloth_face_count is None:
+            cloth = m
+        elif isinstance(cloth_face_count, bool) or not isinstance(cloth_face_count, int | np.integer) \
+                or not 0 <= cloth_face_count <= m:
+            raise InputError("argument", "cloth_face_count", f"{cloth_face_count!r} is not an integer in [0, {m}]",
+                             "pass the number of cloth faces (they come first), or None")
+        else:
+            cloth = int(cloth_face_count)
         dev = self.device
+        wp.launch(_reset_hit_counts, dim=1, outputs=[self.hit_count, self.crossing_count], device=dev)
+        if m < 2:
+            return
         wp.launch(_compute_exact_face_boxes, dim=m, inputs=[self.faces, points],
                   outputs=[self.face_lower, self.face_upper], device=dev)
-        pairs, pair_count = self.spatial_hash.find_pairs(self.face_lower, self.face_upper)
-        self.stats.face_pairs = pair_count
-        if pair_count == 0:
-            return 0
-        while True:
-            self.hit_count.zero_()
-            wp.launch(_test_face_pairs, dim=pair_count,
-                      inputs=[self.faces, self.face_edges, self.edges, self.edge_owner, points, pairs,
-                              self.hit_capacity],
-                      outputs=[self.hit_count, self.hits, self.hit_kind, self.hit_bound], device=dev)
-            found = int(self.hit_count.numpy()[0])
-            if found <= self.hit_capacity:
-                return found
-            if found > MAX_HITS:
-                raise CapacityError(f"intersection hit buffer: {found} hits exceed {MAX_HITS}; "
-                                    "the mesh is massively self-intersecting")
+        hash_ = self.spatial_hash
+        hash_.find_pairs_device(self.face_lower, self.face_upper)
+        wp.launch(_test_face_pairs, dim=hash_.pair_capacity,
+                  inputs=[self._topology, points, hash_.pairs, hash_.counts, cloth, self.hit_capacity],
+                  outputs=[self.hit_count, self.crossing_count, self.hits, self.hit_kind, self.hit_bound],
+                  device=dev)
+
+    def check_capacity(self) -> bool:
+        """Sync point after :meth:`count_device`: raise the hash's deferred input errors, grow the hash
+        and the hit buffer where they overflowed (1.25 x the exact need).
+
+        Returns:
+            True when everything fit (``crossing_count`` and the hits are valid); False when a buffer
+            grew: run :meth:`count_device` again (and record it again).
+
+        Raises:
+            InputError: NaN or Inf positions (found as non-finite boxes).
+            CapacityError: more hits or pairs than int32 slots.
+
+        Allocates: when a buffer grows. Capture-safe: no.
+        """
+        if self.face_count < 2:
+            self._hit_total = 0
+            return True
+        if not self.spatial_hash.check_capacity():
+            return False  # the hits of a partial pair set only bound the need from below: size them next run
+        fits = True
+        found = int(self.hit_count.numpy()[0])
+        if found > MAX_HITS:
+            raise CapacityError(f"intersection hit buffer: {found} hits exceed {MAX_HITS}; "
+                                "the mesh is massively self-intersecting")
+        if found > self.hit_capacity:
             self._allocate_hits(min(MAX_HITS, int(found * _GROWTH) + 1))
-            self.stats.reruns += 1
+            self._hit_reruns += 1
+            fits = False
+        self._hit_total = found
+        return fits
+
+    def _device_positions(self, positions: object) -> wp.array:
+        """A position array used in place: type, shape, dtype, device and layout checked on the host."""
+        n = self.vertex_count
+        if not isinstance(positions, wp.array):
+            raise InputError("argument", "positions", f"got {type(positions).__name__}, not a wp.array",
+                             f"pass a ({n},) wp.array of vec3 on {self.device}")
+        if positions.dtype != wp.vec3 or positions.ndim != 1 or positions.shape[0] != n:
+            raise InputError("argument", "positions", f"got a {positions.shape} array of "
+                             f"{wp.types.type_repr(positions.dtype)}", f"pass a ({n},) wp.array of vec3")
+        if positions.device != self.device:
+            raise InputError("argument", "positions", f"array is on {positions.device}, the check on "
+                             f"{self.device}", f"copy it to {self.device} first")
+        if not positions.is_contiguous:
+            raise InputError("argument", "positions", "array is not contiguous", "pass a contiguous array")
+        return positions
+
+    def _run(self, positions: object) -> int:
+        """The device path and its sync point until the buffers fit; returns the exact hit count."""
+        self.stats = IntersectionStats()
+        points = self._upload(positions)
+        if self.face_count < 2:
+            return 0
+        self._hit_reruns = 0
+        while True:
+            self.count_device(points)
+            if self.check_capacity():
+                break
+        self.stats.face_pairs = self.spatial_hash.stats.triangle_pairs
+        self.stats.reruns = self._hit_reruns
+        return self._hit_total
 
     def find(self, positions: object) -> np.ndarray:
         """All reported (edge id, face id) pairs: the edge meets the face or is within its bound of it.
@@ -285,7 +403,8 @@ class IntersectionCheck:
         intersect is within the certified distance bound of :mod:`pscc.geometry.segment_triangle`
         (see :meth:`details`). Edge ids index :attr:`edge_vertices`.
 
-        Sync points: the four of the spatial hash, the hit count and the copy of the hits.
+        Sync points: :meth:`check_capacity` after each run of :meth:`count_device` (until the buffers
+        fit), then the copy of the hits.
 
         Args:
             positions: (vertex_count, 3) float positions (NumPy or nested lists, converted to float32

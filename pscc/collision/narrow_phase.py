@@ -11,14 +11,25 @@ buffer                  shape, dtype           meaning
 vertex_face_toi         (capacity_vf,) f32     time of impact per vertex-face candidate; > 1 =
                                                no contact (``pscc.geometry.ccd.NO_HIT``)
 edge_edge_toi           (capacity_ee,) f32     likewise per edge-edge candidate
+hit_counts              (2,) int32             valid rows with toi <= 1 after the last run:
+                                               [vertex-face, edge-edge]
+moved                   (vertex_count,) int32  per-vertex marks of the CCD re-check
 ======================  =====================  ===============================================
+
+Every kernel is launched at the capacity of its candidate buffer and reads the number of valid rows
+from ``candidates.counts`` on the device (clamped to the buffers), so :meth:`NarrowPhase.run_device`
+reads nothing back and can be captured into a graph. The time-of-impact buffers are at least as long
+as the candidate buffers (:meth:`NarrowPhase.reserve`, called by the owner after
+:meth:`CandidatePairs.fits` grew them), and :meth:`NarrowPhase.contacts` hands the rows to the
+consumers of :mod:`pscc.collision.contacts`. Rows past the count are neither written nor counted.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from pscc.collision.candidates import CandidatePairs
+from pscc.collision.candidates import CandidatePairs, valid_rows
+from pscc.collision.contacts import ContactArgs, DeviceContacts
 from pscc.geometry import distance_tolerances
 from pscc.geometry.ccd import CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
 from pscc.geometry.distance import edge_edge_distance_squared, vertex_face_distance_squared
@@ -37,23 +48,37 @@ def _vertex_face_narrow(
     params: CcdParameters,
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
+    counts: wp.array(dtype=wp.int32),
     # out:
     toi_out: wp.array(dtype=wp.float32),
+    hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex-face candidate. With ``only_moved``, a pair none of whose vertices is
-    marked in ``moved`` keeps its previous result (its trajectory has not changed)."""
+    """One thread per vertex-face candidate slot (threads past the clamped ``counts[0]`` return).
+    With ``only_moved``, a pair none of whose vertices is marked in ``moved`` keeps its previous
+    result (its trajectory has not changed). Every valid row with toi <= 1 adds 1 to ``hit_counts[0]``."""
     i = wp.tid()
+    if i >= valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])):
+        return
     pair = pairs[i]
     v = pair[0]
     f = faces[pair[1]]
+    # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
+    retest = int(1)
     if only_moved != 0:
         if moved[v] + moved[f[0]] + moved[f[1]] + moved[f[2]] == 0:
-            return
-    toi_out[i] = vertex_face_ccd_toi(
-        positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
-        positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
-        thickness, 0.0, params,
-    )
+            retest = 0
+    toi = float(0.0)
+    if retest == 0:
+        toi = toi_out[i]
+    else:
+        toi = vertex_face_ccd_toi(
+            positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
+            positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
+            thickness, 0.0, params,
+        )
+        toi_out[i] = toi
+    if toi <= 1.0:
+        wp.atomic_add(hit_counts, 0, 1)
 
 
 @wp.kernel
@@ -67,22 +92,36 @@ def _edge_edge_narrow(
     params: CcdParameters,
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
+    counts: wp.array(dtype=wp.int32),
     # out:
     toi_out: wp.array(dtype=wp.float32),
+    hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per edge-edge candidate (``moved``, ``only_moved``: as for vertex-face)."""
+    """One thread per edge-edge candidate slot (threads past the clamped ``counts[1]`` return;
+    ``moved``, ``only_moved``, ``hit_counts[1]``: as for vertex-face)."""
     i = wp.tid()
+    if i >= valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])):
+        return
     pair = pairs[i]
     a = edges[pair[0]]
     b = edges[pair[1]]
+    # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
+    retest = int(1)
     if only_moved != 0:
         if moved[a[0]] + moved[a[1]] + moved[b[0]] + moved[b[1]] == 0:
-            return
-    toi_out[i] = edge_edge_ccd_toi(
-        positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
-        positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
-        thickness, 0.0, params,
-    )
+            retest = 0
+    toi = float(0.0)
+    if retest == 0:
+        toi = toi_out[i]
+    else:
+        toi = edge_edge_ccd_toi(
+            positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
+            positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
+            thickness, 0.0, params,
+        )
+        toi_out[i] = toi
+    if toi <= 1.0:
+        wp.atomic_add(hit_counts, 1, 1)
 
 
 @wp.kernel
@@ -152,11 +191,16 @@ def _vertex_face_proximity(
     thickness: float,
     params: CcdParameters,
     proximity: ProximityParameters,
+    counts: wp.array(dtype=wp.int32),
     # out:
     toi_out: wp.array(dtype=wp.float32),
+    hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex-face candidate: closed-form distance for well-shaped faces, else the search."""
+    """One thread per vertex-face candidate slot (threads past the clamped ``counts[0]`` return):
+    closed-form distance for well-shaped faces, else the search; hits add 1 to ``hit_counts[0]``."""
     i = wp.tid()
+    if i >= valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])):
+        return
     pair = pairs[i]
     f = faces[pair[1]]
     p = positions[pair[0]]
@@ -168,12 +212,16 @@ def _vertex_face_proximity(
     n = wp.cross(ab, ac)
     longest = wp.max(wp.max(wp.dot(ab, ab), wp.dot(ac, ac)), wp.dot(c - b, c - b))
     area_sq = wp.dot(n, n)
+    toi = float(0.0)
     if area_sq == 0.0 or area_sq >= proximity.well_shaped_flatness * longest * longest:
         error = proximity.distance_error * _local_scale(a, b, c, p)
-        toi_out[i] = _within(vertex_face_distance_squared(p, a, b, c), thickness, error)
+        toi = _within(vertex_face_distance_squared(p, a, b, c), thickness, error)
     else:
         # Nearly flat triangle: the closed form may overestimate; the inclusion search is exact-safe.
-        toi_out[i] = vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
+        toi = vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
+    toi_out[i] = toi
+    if toi <= 1.0:
+        wp.atomic_add(hit_counts, 0, 1)
 
 
 @wp.kernel
@@ -185,11 +233,16 @@ def _edge_edge_proximity(
     thickness: float,
     params: CcdParameters,
     proximity: ProximityParameters,
+    counts: wp.array(dtype=wp.int32),
     # out:
     toi_out: wp.array(dtype=wp.float32),
+    hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per edge-edge candidate: closed-form distance (its bound holds for every edge pair)."""
+    """One thread per edge-edge candidate slot (threads past the clamped ``counts[1]`` return):
+    closed-form distance (its bound holds for every edge pair); hits add 1 to ``hit_counts[1]``."""
     i = wp.tid()
+    if i >= valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])):
+        return
     pair = pairs[i]
     ea = edges[pair[0]]
     eb = edges[pair[1]]
@@ -198,11 +251,19 @@ def _edge_edge_proximity(
     b0 = positions[eb[0]]
     b1 = positions[eb[1]]
     error = proximity.distance_error * _local_scale(a0, a1, b0, b1)
-    toi_out[i] = _within(edge_edge_distance_squared(a0, a1, b0, b1), thickness, error)
+    toi = _within(edge_edge_distance_squared(a0, a1, b0, b1), thickness, error)
+    toi_out[i] = toi
+    if toi <= 1.0:
+        wp.atomic_add(hit_counts, 1, 1)
 
 
 class NarrowPhase:
     """Runs the conservative test on candidate pairs (layout in the module docstring).
+
+    :meth:`run_device` is the device path (launches at the candidate capacities, no host read,
+    capturable); :meth:`run` is the host API on top of it. The owner keeps the time-of-impact buffers
+    as long as the candidate buffers with :meth:`reserve` after every :meth:`CandidatePairs.fits`
+    (the only place the candidate buffers grow).
 
     Args:
         faces: (face_count,) ``wp.vec3i``.
@@ -218,13 +279,29 @@ class NarrowPhase:
         self.proximity = proximity_parameters()
         self.vertex_face_toi = wp.empty(1, dtype=wp.float32, device=device)
         self.edge_edge_toi = wp.empty(1, dtype=wp.float32, device=device)
+        self.hit_counts = wp.zeros(2, dtype=wp.int32, device=device)
         self._no_marks = wp.zeros(1, dtype=wp.int32, device=device)
         self.moved = wp.zeros(0, dtype=wp.int32, device=device)
+        self._continuous = False
+        self._thickness = 0.0
 
     @property
     def device_bytes(self) -> int:
         """Bytes held on the device."""
-        return self.vertex_face_toi.capacity + self.edge_edge_toi.capacity + self.moved.capacity
+        return (self.vertex_face_toi.capacity + self.edge_edge_toi.capacity + self.moved.capacity
+                + self.hit_counts.capacity)
+
+    def reserve(self, candidates: CandidatePairs) -> None:
+        """Grow the time-of-impact buffers to at least the candidates' capacities (contents not kept).
+
+        Reads nothing from the device; call it after :meth:`CandidatePairs.fits` (which may grow the
+        candidates) and before :meth:`run_device`.
+        Allocates: only when the candidate buffers grew. Capture-safe: no.
+        """
+        if self.vertex_face_toi.shape[0] < candidates.capacity_vf:
+            self.vertex_face_toi = wp.empty(candidates.capacity_vf, dtype=wp.float32, device=self.device)
+        if self.edge_edge_toi.shape[0] < candidates.capacity_ee:
+            self.edge_edge_toi = wp.empty(candidates.capacity_ee, dtype=wp.float32, device=self.device)
 
     def mark_moved(self, old_t0: wp.array, new_t0: wp.array, old_t1: wp.array, new_t1: wp.array) -> wp.array:
         """Per-vertex int32 marks (``self.moved``): 1 where the start or end position changed.
@@ -237,6 +314,66 @@ class NarrowPhase:
                   device=self.device)
         return self.moved
 
+    def run_device(
+        self,
+        candidates: CandidatePairs,
+        positions_t0: wp.array,
+        positions_t1: wp.array,
+        thickness: float,
+        moved: wp.array | None = None,
+    ) -> None:
+        """Test the valid candidates of each kind, reading their numbers from ``candidates.counts``
+        on the device (clamped to the buffers), and fill :attr:`hit_counts`.
+
+        DCD when ``positions_t1`` is ``positions_t0`` (hits get toi 0, misses 2), CCD otherwise.
+        ``moved`` (CCD only): per-vertex int32 marks (:meth:`mark_moved`); when given, only pairs with
+        a marked vertex are tested again and the others keep the time of impact of the previous run,
+        which must have been a CCD run on the same candidates and thickness, with every vertex whose
+        start or end position changed since marked. ``hit_counts`` counts the valid rows with
+        toi <= 1, kept rows included.
+
+        Args:
+            candidates: the candidate pairs (their buffers at most as long as the toi buffers).
+            positions_t0: (vertex_count,) ``wp.vec3`` start positions (DCD: the positions).
+            positions_t1: (vertex_count,) ``wp.vec3`` end positions, or ``positions_t0`` itself (DCD).
+            thickness: the distance tested (length units).
+            moved: optional (vertex_count,) int32 marks of the CCD re-check.
+
+        Raises:
+            ValueError: the toi buffers are shorter than the candidate buffers (call :meth:`reserve`).
+
+        Allocates: no. Capture-safe: yes.
+        """
+        if (self.vertex_face_toi.shape[0] < candidates.capacity_vf
+                or self.edge_edge_toi.shape[0] < candidates.capacity_ee):
+            raise ValueError(
+                f"time-of-impact buffers ({self.vertex_face_toi.shape[0]}, {self.edge_edge_toi.shape[0]}) are "
+                f"shorter than the candidate buffers ({candidates.capacity_vf}, {candidates.capacity_ee}); "
+                "call NarrowPhase.reserve(candidates) after CandidatePairs.fits()")
+        self.hit_counts.zero_()
+        self._continuous = positions_t1 is not positions_t0
+        self._thickness = float(thickness)
+        if positions_t1 is positions_t0:
+            wp.launch(_vertex_face_proximity, dim=candidates.capacity_vf,
+                      inputs=[self.faces, candidates.vertex_face, positions_t0, float(thickness), self.params,
+                              self.proximity, candidates.counts],
+                      outputs=[self.vertex_face_toi, self.hit_counts], device=self.device)
+            wp.launch(_edge_edge_proximity, dim=candidates.capacity_ee,
+                      inputs=[self.edges, candidates.edge_edge, positions_t0, float(thickness), self.params,
+                              self.proximity, candidates.counts],
+                      outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
+            return
+        only_moved = int(moved is not None)
+        marks = moved if moved is not None else self._no_marks
+        wp.launch(_vertex_face_narrow, dim=candidates.capacity_vf,
+                  inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1, float(thickness),
+                          self.params, marks, only_moved, candidates.counts],
+                  outputs=[self.vertex_face_toi, self.hit_counts], device=self.device)
+        wp.launch(_edge_edge_narrow, dim=candidates.capacity_ee,
+                  inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1, float(thickness),
+                          self.params, marks, only_moved, candidates.counts],
+                  outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
+
     def run(
         self,
         candidates: CandidatePairs,
@@ -245,47 +382,43 @@ class NarrowPhase:
         thickness: float,
         moved: wp.array | None = None,
     ) -> None:
-        """Test the first ``count`` candidates of each kind (counts read by ``candidates.fits()``).
+        """Test the valid candidates (host API): :meth:`reserve`, then :meth:`run_device`.
 
-        ``moved`` (CCD only): per-vertex int32 marks (:meth:`mark_moved`); when given, only pairs with
-        a marked vertex are tested again and the others keep the time of impact of the previous run,
-        which must have been a CCD run on the same candidates and thickness, with every vertex whose
-        start or end position changed since marked.
+        Arguments as for :meth:`run_device`; the candidates' counts are read on the device, so the
+        rows tested are those of the last broad phase (after :meth:`CandidatePairs.fits` accepted it).
 
-        Allocates: only when the candidate buffers grew. Capture-safe: no (sizes come from the host).
+        Allocates: only when the candidate buffers grew. Capture-safe: no.
         """
-        vf = candidates.vertex_face_count
-        ee = candidates.edge_edge_count
-        if self.vertex_face_toi.shape[0] < candidates.capacity_vf:
-            self.vertex_face_toi = wp.empty(candidates.capacity_vf, dtype=wp.float32, device=self.device)
-        if self.edge_edge_toi.shape[0] < candidates.capacity_ee:
-            self.edge_edge_toi = wp.empty(candidates.capacity_ee, dtype=wp.float32, device=self.device)
-        if positions_t1 is positions_t0:
-            self._proximity(candidates, positions_t0, thickness)
-            return
-        only_moved = int(moved is not None)
-        marks = moved if moved is not None else self._no_marks
-        if vf > 0:
-            wp.launch(_vertex_face_narrow, dim=vf,
-                      inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1,
-                              float(thickness), self.params, marks, only_moved],
-                      outputs=[self.vertex_face_toi], device=self.device)
-        if ee > 0:
-            wp.launch(_edge_edge_narrow, dim=ee,
-                      inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1,
-                              float(thickness), self.params, marks, only_moved],
-                      outputs=[self.edge_edge_toi], device=self.device)
+        self.reserve(candidates)
+        self.run_device(candidates, positions_t0, positions_t1, thickness, moved=moved)
 
-    def _proximity(self, candidates: CandidatePairs, positions: wp.array, thickness: float) -> None:
-        vf = candidates.vertex_face_count
-        ee = candidates.edge_edge_count
-        if vf > 0:
-            wp.launch(_vertex_face_proximity, dim=vf,
-                      inputs=[self.faces, candidates.vertex_face, positions, float(thickness), self.params,
-                              self.proximity],
-                      outputs=[self.vertex_face_toi], device=self.device)
-        if ee > 0:
-            wp.launch(_edge_edge_proximity, dim=ee,
-                      inputs=[self.edges, candidates.edge_edge, positions, float(thickness), self.params,
-                              self.proximity],
-                      outputs=[self.edge_edge_toi], device=self.device)
+    def contacts(self, candidates: CandidatePairs, *, continuous: bool | None = None,
+                 thickness: float | None = None) -> DeviceContacts:
+        """The device view of the last run's results (:mod:`pscc.collision.contacts`).
+
+        Args:
+            candidates: the candidates the last :meth:`run_device` tested.
+            continuous: whether that run was a CCD (default: as recorded by the last run).
+            thickness: the distance it tested (default: as recorded by the last run).
+
+        Returns:
+            A :class:`DeviceContacts` whose ``args`` name the faces, edges, candidate rows, toi
+            buffers and ``candidates.counts``, and whose ``hit_counts`` is :attr:`hit_counts`; all
+            stay valid until the buffers grow (:meth:`CandidatePairs.fits` / :meth:`reserve`).
+
+        Allocates: no (a host struct only). Capture-safe: yes.
+        """
+        args = ContactArgs()
+        args.faces = self.faces
+        args.edges = self.edges
+        args.vertex_face = candidates.vertex_face
+        args.edge_edge = candidates.edge_edge
+        args.vertex_face_toi = self.vertex_face_toi
+        args.edge_edge_toi = self.edge_edge_toi
+        args.counts = candidates.counts
+        return DeviceContacts(
+            args=args,
+            hit_counts=self.hit_counts,
+            continuous=self._continuous if continuous is None else bool(continuous),
+            thickness=self._thickness if thickness is None else float(thickness),
+        )

@@ -17,14 +17,20 @@ run by one thread, found through *work rows* (a group against a run of later gro
 a token-position rule emits each overlapping face pair from exactly one cell. See
 ``docs/spatial-hash.md`` for the derivations.
 
-Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, all <= entry capacity):
+Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, R = work rows, P = pairs;
+every buffer has a fixed capacity, and kernels run at it and stop at the device counts):
 
 =========================  ====================  ===========================================================
 buffer                     shape, dtype          meaning
 =========================  ====================  ===========================================================
-face_cells / face_end      (face_count,) int64   cells a face's box overlaps / inclusive scan (entry ends)
+scene                      (8,) float64          min corner, max corner, axis-length sum, bad boxes
+grid                       (1,) GridState        origin, cell size, dims and slab margin of this call
+loop_flag                  (1,) int32            condition of the grid loop (``wp.capture_while``)
+face_cells / face_end      (face_count,) int64   cells a face's box overlaps / inclusive scan (entry ends);
+                                                 face_cells first holds the ``face_order`` marks
 entry_key / entry_face     (2 E,) int64 / int32  {cell, node} key and face of each entry, sorted by key
-                                                 (the second half is radix-sort scratch)
+                                                 (the whole capacity is sorted: unused slots hold the
+                                                 largest key; the second half is radix-sort scratch)
 group_rank / cell_rank     (E,) int32            1-based group / cell of each sorted entry (scans of heads)
 group_start / group_end    (E,) / (G,) int32     entry range of group g (triangleHashTable row g);
                                                  group_start first holds the run-head flags
@@ -41,13 +47,18 @@ row_work / row_scan        (R,) int64            BV tests of row r = n_g x (b_en
                                                  scan (searched by the test threads)
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
                                                  (P slots and no keys when ``sort_pairs`` is off)
-counts                     (2,) int64            [pairs emitted, unused]
-work_counts                (3,) int64            [face tests, slab tests, same-node face pairs] of the rows
+counts                     (2,) int64            [pairs emitted (keeps counting past P), unused]
+info                       (17,) int64           device counters (``_spatial_hash_kernels.INFO_*``)
+summary                    (22,) float64         the counters, dims, cell size and pair count, read at once
 =========================  ====================  ===========================================================
 
-Sync points of :meth:`SpatialHash.find_pairs` (host reads of device data, each a few scalars):
-(1) scene bounds and mean box size, (2) entry count and grid size, (3) group count, (4) cell, row,
-face-test and slab-test counts, (5) emitted pair count. Everything else stays on the device.
+Two paths. :meth:`SpatialHash.find_pairs_device` reads nothing back, synchronizes nothing and allocates
+nothing, so it can be recorded into a graph: the scene bounds, the cell size and the grid guard (a
+``wp.capture_while`` loop that doubles the cell size) are decided by single-thread kernels, and the
+later kernels read the device counts. A buffer that is too small is not written past its end: the
+stage stops, the true count is kept, and :meth:`SpatialHash.check_capacity` (the sync point: one
+read of ``summary``) raises deferred input errors, grows what overflowed and says whether to run
+again. :meth:`SpatialHash.find_pairs` is both, repeated until the buffers fit.
 """
 
 from __future__ import annotations
@@ -58,7 +69,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from pscc import tolerances
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.errors import CapacityError, InputError
 
@@ -68,10 +78,20 @@ DEFAULT_CELL_SIZE_FACTOR: float = 1.5
 """k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value)."""
 
 TESTS_PER_LAUNCH: int = 2**24
-"""BV tests (threads) per launch of the test kernel; bounds launch size, not memory (O(G))."""
+"""Default bound on the BV tests of one test launch: the launch has at most
+ceil(tests_per_launch / tests_per_thread) threads (and at most ``DEFAULT_TEST_THREADS``)."""
 
-MAX_GRID_CELLS: int = 2**31 - 1
+DEFAULT_TEST_THREADS: dict[str, int] = {"cuda": 2**20, "cpu": 2**10}
+"""Threads of the test launch per device kind; each runs a contiguous chunk of the device-known
+BV tests (at least ``tests_per_thread``), so the launch size does not depend on device data."""
+
+MAX_GRID_CELLS: int = kernels.MAX_GRID_CELLS
 """Most cells of the grid: a CellId must fit in the high 31 bits of a non-negative int64 key."""
+
+MIN_CELL_BITS: int = 16
+"""Initial cell bits of the entry sort (2^16 cells; more when the face count needs them). The sort
+range must not depend on device data, so the grid guard also coarsens grids with more cells than
+2^cell_bits; :meth:`SpatialHash.check_capacity` then widens the bits and asks for a re-run."""
 
 MAX_ENTRIES: int = 2**30 - 1
 """Most face-cell entries: entries are int32-indexed and the radix sort needs 2 E slots."""
@@ -96,7 +116,8 @@ _GROWTH: float = 1.25
 
 @dataclass
 class SpatialHashStats:
-    """Counters of the last :meth:`SpatialHash.find_pairs` call.
+    """Counters of the last call that :meth:`SpatialHash.check_capacity` read (every
+    :meth:`SpatialHash.find_pairs` call ends with one).
 
     Attributes:
         cell_size: cell edge used (float32 value; larger than requested after coarsening).
@@ -112,7 +133,8 @@ class SpatialHashStats:
         triangle_pairs: face pairs emitted (unique, a < b).
         mean_cells_per_face: E / face_count.
         coarsenings: times the cell size was doubled by the grid guard.
-        reruns: times the test pass ran again after the pair buffer grew.
+        reruns: times the call ran again because the pair buffer grew (re-runs for the other
+            buffers, which overflow before any pair is tested, are not counted).
         same_node_tests: face pairs of one node that met in a cell in two groups (never tested; 0
             unless a ``face_order`` splits a node; checked by the tests).
         device_bytes: bytes held on the device, per buffer.
@@ -154,6 +176,10 @@ class SpatialHash:
     whose closed boxes overlap and whose node ids differ, each once, sorted by (a, b). The grid
     changes only the cost, never the result. Buffer layout in the module docstring.
 
+    Sync point: :meth:`check_capacity` (one read of the device counters). :meth:`find_pairs_device`
+    reads nothing back and can be recorded into a graph; :meth:`find_pairs` runs both until the
+    buffers fit.
+
     Args:
         face_count: faces m (the length of every per-face array).
         device: Warp device (``None``: the default device).
@@ -164,11 +190,13 @@ class SpatialHash:
         max_mean_cells_per_face: grid guard; more entries than this times face_count double
             the cell size (>= 1).
         pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
-        tests_per_launch: BV tests per launch of the test kernel.
-        tests_per_thread: BV tests each thread of the test kernel runs back to back. ``None``: 1 on
-            a GPU (the paper's one thread per BV test) and 64 on the CPU, whose kernel threads run
-            one after the other (one binary search per 64 tests instead of per test). Either way
-            every thread gets the same amount of work.
+        tests_per_launch: bounds the test launch to ceil(tests_per_launch / tests_per_thread)
+            threads (and to ``DEFAULT_TEST_THREADS``); the launch size is fixed at construction.
+        tests_per_thread: the fewest BV tests each thread of the test kernel runs back to back (a
+            thread runs a contiguous chunk of max(this, ceil(tests / threads)) tests, found with one
+            binary search). ``None``: 1 on a GPU (one thread per BV test while the tests fit the
+            launch, as in the paper) and 64 on the CPU, whose kernel threads run one after the other.
+            Either way every thread gets the same amount of work.
         sort_pairs: sort the emitted pairs by (a, b) (deterministic order on every device). Without
             sorting, the order follows the atomic appends (deterministic on the CPU only) and the
             pair buffer needs half the memory; the detector sorts its final results anyway.
@@ -181,6 +209,8 @@ class SpatialHash:
 
     Raises:
         InputError: invalid arguments.
+
+    Allocates: yes (every buffer at its initial capacity). Capture-safe: no.
     """
 
     def __init__(
@@ -257,19 +287,25 @@ class SpatialHash:
         self.chunk_length_sum = wp.empty(self._chunk_count, dtype=wp.float64, device=dev)
         self.chunk_bad = wp.empty(self._chunk_count, dtype=wp.int32, device=dev)
         self.scene = wp.zeros(8, dtype=wp.float64, device=dev)
+        self.grid = wp.zeros(1, dtype=kernels.GridState, device=dev)
+        self.loop_flag = wp.zeros(1, dtype=wp.int32, device=dev)
         self.face_cells = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.grid_max = wp.zeros(4, dtype=wp.int32, device=dev)
-        self.entry_info = wp.zeros(5, dtype=wp.int64, device=dev)
-        self.table_info = wp.zeros(6, dtype=wp.int64, device=dev)
+        self.info = wp.zeros(kernels.INFO_SIZE, dtype=wp.int64, device=dev)
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
-        self.work_counts = wp.zeros(3, dtype=wp.int64, device=dev)
+        self.summary = wp.zeros(kernels.SUMMARY_SIZE, dtype=wp.float64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
+        kind = "cuda" if self.device.is_cuda else "cpu"
+        self.test_threads = max(1, min(DEFAULT_TEST_THREADS[kind], -(-tests_per_launch // self.tests_per_thread)))
+        self.cell_bits = min(31, max(MIN_CELL_BITS, m.bit_length()))
         self._allocate_entries(max(1, 4 * m))
         capacity = 4 * m if pair_capacity is None else pair_capacity
         self._allocate_pairs(max(1, min(MAX_PAIRS, capacity)))
         self._allocate_rows(max(1, m // 4))
         self._pair_count = 0
+        self._pair_reruns = 0
+        self._last_call: tuple[bool, int] | None = None
         self.stats = SpatialHashStats()
 
     # ------------------------------------------------------------------ buffers
@@ -284,12 +320,16 @@ class SpatialHash:
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
         self.group_start = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.cell_end = wp.empty(capacity, dtype=wp.int32, device=dev)
-        if not hasattr(self, "group_end"):
+        if hasattr(self, "group_end"):
+            self._make_row_views()
+        else:
             self._allocate_groups(max(1, capacity // 4))
 
     def _allocate_groups(self, capacity: int) -> None:
-        """Per-group tables, sized by the group count (far below the entry count on cloth)."""
+        """Per-group tables, sized by the group count (far below the entry count on cloth); never
+        more slots than entries (the rank buffers of the entries hold the per-group row counts)."""
         dev = self.device
+        capacity = max(1, min(capacity, self.entry_capacity))
         self.group_capacity = capacity
         self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
@@ -297,6 +337,13 @@ class SpatialHash:
         self.group_axis = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
         self.group_slab = wp.empty(slab_capacity, dtype=wp.vec2, device=dev)
         self.group_mask = wp.empty(slab_capacity, dtype=wp.uint64, device=dev)
+        self._make_row_views()
+
+    def _make_row_views(self) -> None:
+        """The rank buffers are free once the tables are written: they hold the rows per group. The
+        views are made here, when a buffer is allocated, so the device path makes none."""
+        self.row_count = self.group_rank[: self.group_capacity]
+        self.row_end = self.cell_rank[: self.group_capacity]
 
     def _allocate_rows(self, capacity: int) -> None:
         """Work rows, sized by the row count (at most the group count without the slab test)."""
@@ -316,8 +363,8 @@ class SpatialHash:
     @property
     def device_bytes(self) -> dict[str, int]:
         """Bytes held on the device, per buffer name."""
-        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "face_cells",
-                 "face_end", "grid_max", "entry_info", "table_info", "counts", "work_counts", "own_node_id",
+        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "grid", "loop_flag",
+                 "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
                  "faces", "entry_key", "entry_face", "group_rank", "cell_rank", "group_start", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "row_span", "row_work",
                  "row_scan", "pairs", "pair_keys")
@@ -358,8 +405,8 @@ class SpatialHash:
         group slab test: less the pairs of groups separated along a group axis, none of which is
         closer than twice ``half_distance``).
 
-        Sync points: five host reads of a few scalars each (module docstring); the buffers grow
-        when an exact count exceeds their capacity, and the test pass then re-runs.
+        The device path (:meth:`find_pairs_device`), then the sync point :meth:`check_capacity`;
+        again while a buffer had to grow.
 
         Args:
             face_lower: (face_count,) ``wp.vec3`` lower box corners (length units).
@@ -380,23 +427,77 @@ class SpatialHash:
                 equal node ids are contiguous (for PSCC the BVH's face order: every front node is
                 a range of it). Entries are then laid out in this order, so after a stable sort on
                 the cell bits alone the faces of a node stay together in each cell: the sort skips
-                the node bits. Checked to be a permutation once per array (its contents must not
-                change between calls); a grouping it breaks is caught by the same-node counter.
+                the node bits. Checked on the device to be a permutation; a grouping it breaks is
+                caught by the same-node counter.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
-            (a, b) and valid until the next call, and the number of pairs.
+            (a, b) when ``sort_pairs``, valid until the next call, and the number of pairs.
 
         Raises:
             InputError: wrong array, non-finite or inverted box, bad cell size, a node id outside
                 [0, node_id_bound), a ``face_order`` that is no permutation or splits a node.
-            CapacityError: more entries or pairs than int32 indexing allows.
+            CapacityError: more pairs than int32 indexing allows.
 
         Allocates: when a buffer grows. Capture-safe: no.
         """
+        self._pair_reruns = 0
+        while True:
+            self.find_pairs_device(face_lower, face_upper, node_id, positions_t0=positions_t0,
+                                   positions_t1=positions_t1, half_distance=half_distance,
+                                   node_id_bound=node_id_bound, face_order=face_order, cell_size=cell_size)
+            if self.check_capacity():
+                return self.pairs[: self._pair_count], self._pair_count
+
+    def find_pairs_device(
+        self,
+        face_lower: wp.array,
+        face_upper: wp.array,
+        node_id: wp.array | None = None,
+        *,
+        positions_t0: wp.array | None = None,
+        positions_t1: wp.array | None = None,
+        half_distance: float = 0.0,
+        node_id_bound: int | None = None,
+        face_order: wp.array | None = None,
+        cell_size: float | None = None,
+    ) -> None:
+        """The pairs of :meth:`find_pairs`, left on the device: no host read, synchronization,
+        allocation or upload, so the call can be recorded into a graph.
+
+        Results: ``self.pairs`` (the buffer) and ``self.counts[0]`` (int64, pairs emitted; the
+        valid rows are the first min(counts[0], pair_capacity), sorted by (a, b) when
+        ``sort_pairs``). Buffers that are too small are never written past their end: the stage
+        stops and keeps its true count, and :meth:`check_capacity` (the sync point the caller
+        chooses) grows them and says whether to run again. Input problems found on the device
+        (non-finite or inverted boxes, node ids out of range, a ``face_order`` that is no
+        permutation or splits a node) are raised by :meth:`check_capacity` as well.
+
+        The grid loop (cell size doubling) is a ``wp.capture_while``: in a graph it stays on the
+        device; called eagerly on a GPU, Warp reads its condition once per iteration.
+
+        Args:
+            face_lower: (face_count,) ``wp.vec3`` lower box corners, as for :meth:`find_pairs`.
+            face_upper: (face_count,) ``wp.vec3`` upper box corners.
+            node_id: (face_count,) ``wp.int32`` node ids, or ``None`` (every face its own node).
+            positions_t0: vertex positions for the group slab test (with node ids).
+            positions_t1: positions at the end of the step (CCD), or ``None``.
+            half_distance: the half distance the boxes were grown by (length units, >= 0).
+            node_id_bound: node ids lie in [0, node_id_bound) (checked on the device), or ``None``.
+            face_order: node-contiguous permutation of the faces (checked on the device), or ``None``.
+            cell_size: grid cell edge, or ``None`` (``cell_size_factor`` x the mean box axis length).
+            Only types, shapes, devices and host scalars are validated here.
+
+        Raises:
+            InputError: wrong arrays or scalar arguments.
+
+        Allocates: no. Capture-safe: yes (with the arrays of the recorded call; after
+        :meth:`check_capacity` grows a buffer, record again).
+        """
         self._check_array(face_lower, "face_lower", wp.vec3)
         self._check_array(face_upper, "face_upper", wp.vec3)
-        if node_id is None:
+        own_nodes = node_id is None
+        if own_nodes:
             node_id = self.own_node_id
             node_id_bound = max(1, self.face_count)
         else:
@@ -406,72 +507,161 @@ class SpatialHash:
                                           or not 1 <= node_id_bound <= 2**31):
             raise InputError("argument", "node_id_bound", f"{node_id_bound!r} is not an integer in [1, 2^31]",
                              "pass one more than the largest node id, or None")
-        if cell_size is not None:
-            cell_size = _check_positive(cell_size, "cell_size")
+        fixed_cell_size = 0.0 if cell_size is None else _check_positive(cell_size, "cell_size")
         if face_order is not None:
-            self._check_face_order(face_order)
-        slab = self._slab_args(node_id is not self.own_node_id, positions_t0, positions_t1, half_distance)
-        self.stats = SpatialHashStats()
-        self._pair_count = 0
-        if self.face_count < 2:
-            self.stats.device_bytes = self.device_bytes
-            if self.face_count == 1:
-                self.stats.entries = self.stats.groups = self.stats.cells = 1
-                self.stats.mean_cells_per_face = 1.0
-            return self.pairs[:0], 0
-
-        origin, extent, mean_length = self._scene_bounds(face_lower, face_upper)
-        self._slab_margin(slab, origin, extent)
-        if cell_size is None:
-            cell_size = self.cell_size_factor * mean_length
-            if not cell_size > 0.0:  # every box is degenerate: one cell per scene extent
-                cell_size = max(float(np.max(extent)), 1.0)
-        grid = kernels.GridArgs()
-        grid.origin = wp.vec3(*origin)
-        grid.node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
+            self._check_array(face_order, "face_order", wp.int32)
+        slab, half = self._slab_args(not own_nodes, positions_t0, positions_t1, half_distance)
+        node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
-        # Faces in node-contiguous order (own ids: face order; else the given order) need only the cell bits sorted.
-        grouped_fill = node_id is self.own_node_id or face_order is not None
-        order = self.own_node_id if face_order is None else face_order
-        entries = self._insert_faces(face_lower, face_upper, node_id, node_limit, grid, cell_size, extent, order,
-                                     face_order is not None, grouped_fill)
-        self._build_tables(entries, grid.node_bits, slab, int(face_order is not None))
-        self._test_pairs(face_lower, face_upper, grid)
-        if face_order is not None and self.stats.same_node_tests > 0:
-            raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
-                             "pass an order in which equal node ids are adjacent, or None")
-        if self.sort_pairs:
-            self._sort_pairs()
-        self.stats.mean_cells_per_face = entries / self.face_count
-        self.stats.device_bytes = self.device_bytes
-        return self.pairs[: self._pair_count], self._pair_count
+        self._last_call = (face_order is not None, node_limit)
+        self._pair_count = 0
+        dev = self.device
+        wp.launch(kernels._reset_counters, dim=1, outputs=[self.info, self.counts, self.grid_max], device=dev)
+        if self.face_count >= 2:
+            self._plan(face_lower, face_upper, face_order, fixed_cell_size, half)
+            ordered = face_order is not None
+            order = self.own_node_id if face_order is None else face_order
+            wp.capture_while(self.loop_flag, self._count_cells, face_lower=face_lower, face_upper=face_upper,
+                             node_id=node_id, node_limit=node_limit, order=order, ordered=int(ordered))
+            # Faces in node-contiguous order (own ids: face order; else the given order) need only the
+            # cell bits sorted.
+            self._insert_faces(face_lower, face_upper, node_id, node_bits, order, ordered, own_nodes or ordered)
+            self._build_tables(node_bits, slab, int(ordered))
+            self._test_pairs(face_lower, face_upper, node_bits)
+            if self.sort_pairs:
+                self._sort_pairs()
+        wp.launch(kernels._gather_summary, dim=1, inputs=[self.info, self.grid, self.counts],
+                  outputs=[self.summary], device=dev)
 
-    def _check_face_order(self, face_order: wp.array) -> None:
-        """Shape and dtype on every call; that it is a permutation once per array (one host read)."""
-        self._check_array(face_order, "face_order", wp.int32)
-        key = (face_order.ptr, face_order.shape[0])
-        if key == getattr(self, "_checked_order", None):
-            return
-        order = face_order.numpy()
-        if order.shape[0] and (order.min() < 0 or order.max() >= self.face_count
-                               or np.bincount(order, minlength=self.face_count).max() != 1):
+    def overflow_counters(self) -> list[tuple[wp.array, int, int]]:
+        """``(device counter, index, capacity)`` triples: after a device call, a counter above its
+        capacity means :meth:`check_capacity` has work to do (a buffer to grow, wider cell bits or a
+        deferred input error). For callers that gather overflow flags on the device; the capacities
+        change only in :meth:`check_capacity`."""
+        info = self.info
+        return [(info, kernels.INFO_ENTRIES, self.entry_capacity), (info, kernels.INFO_GROUPS, self.group_capacity),
+                (info, kernels.INFO_ROWS, self.row_capacity), (self.counts, 0, self.pair_capacity),
+                (info, kernels.INFO_WANTED_CELLS, 0), (info, kernels.INFO_BAD_BOXES, 0),
+                (info, kernels.INFO_BAD_NODES, 0), (info, kernels.INFO_BAD_ORDER, 0)]
+
+    def grow(self, counters: set[int]) -> None:
+        """Double the buffers behind the given :meth:`overflow_counters` indices (0 entries, 1 groups,
+        2 rows, 3 pairs) ahead of an overflow (a caller that saw them nearly full). A recorded call
+        then holds stale buffers and must be recorded again.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        if 0 in counters:
+            self._allocate_entries(min(MAX_ENTRIES, 2 * self.entry_capacity))
+        if 1 in counters:
+            self._allocate_groups(min(MAX_ENTRIES, 2 * self.group_capacity))
+        if 2 in counters:
+            self._allocate_rows(min(MAX_ENTRIES, 2 * self.row_capacity))
+        if 3 in counters:
+            self._allocate_pairs(min(MAX_PAIRS, 2 * self.pair_capacity))
+
+    def check_capacity(self) -> bool:
+        """Sync point: read the counters of the last device call (one copy), raise its deferred input
+        errors, grow every buffer that overflowed (1.25 x the exact need) and fill :attr:`stats`.
+
+        Returns:
+            True when everything fit (the results are valid); False when a buffer grew or the sort's
+            cell bits were widened: run the device call again (and record it again: grown buffers
+            are new arrays).
+
+        Raises:
+            InputError: non-finite or inverted boxes, node ids outside [0, node_id_bound), a
+                ``face_order`` that is no permutation or splits a node.
+            CapacityError: more pairs than int32 indexing allows.
+
+        Allocates: when a buffer grows. Capture-safe: no.
+        """
+        if self._last_call is None:
+            raise InputError("argument", "check_capacity", "no device call has run", "call find_pairs_device first")
+        summary = self.summary.numpy()
+        info = summary.astype(np.int64)
+        ordered, node_limit = self._last_call
+        self._raise_input_errors(info, ordered, node_limit)
+        fits = True
+        needs = ((kernels.INFO_ENTRIES, "entry_capacity", MAX_ENTRIES, self._allocate_entries),
+                 (kernels.INFO_GROUPS, "group_capacity", MAX_ENTRIES, self._allocate_groups),
+                 (kernels.INFO_ROWS, "row_capacity", MAX_ENTRIES, self._allocate_rows))
+        for slot, name, limit, allocate in needs:
+            need = int(info[slot])
+            if need > getattr(self, name):
+                allocate(min(limit, int(need * _GROWTH) + 1))
+                fits = False
+        found = int(info[kernels.SUMMARY_PAIRS])
+        if found > MAX_PAIRS:
+            raise CapacityError(f"spatial hash pair buffer: {found} pairs exceed {MAX_PAIRS}; "
+                                "use smaller boxes or split the scene")
+        if found > self.pair_capacity:
+            self._allocate_pairs(min(MAX_PAIRS, int(found * _GROWTH)))
+            self._pair_reruns += 1
+            fits = False
+        wanted = int(info[kernels.INFO_WANTED_CELLS])
+        if wanted > 0:
+            self.cell_bits = min(31, max(self.cell_bits + 1, (wanted - 1).bit_length()))
+            fits = False
+        self._fill_stats(summary, info)
+        self._pair_count = min(found, self.pair_capacity) if fits else 0
+        if fits:
+            self._pair_reruns = 0
+        return fits
+
+    def _raise_input_errors(self, info: np.ndarray, ordered: bool, node_limit: int) -> None:
+        """The input errors the device path counted, in the order the checks run."""
+        if info[kernels.INFO_BAD_ORDER] > 0:
             raise InputError("argument", "face_order", "is not a permutation of the faces",
                              "pass each face id exactly once")
-        self._checked_order = key
+        if info[kernels.INFO_BAD_BOXES] > 0:
+            raise InputError("argument", "face_lower/face_upper",
+                             f"{int(info[kernels.INFO_BAD_BOXES])} boxes hold NaN/Inf or have lower > upper on "
+                             "some axis", "pass finite boxes with lower <= upper")
+        if node_limit > 0 and info[kernels.INFO_BAD_NODES] > 0:
+            raise InputError("argument", "node_id",
+                             f"{int(info[kernels.INFO_BAD_NODES])} node ids lie outside [0, {node_limit})",
+                             "pass node ids below node_id_bound, or node_id_bound=None")
+        if ordered and info[kernels.INFO_SAME_NODE] > 0:
+            raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
+                             "pass an order in which equal node ids are adjacent, or None")
+
+    def _fill_stats(self, summary: np.ndarray, info: np.ndarray) -> None:
+        """:attr:`stats` from the summary of the last device call."""
+        m = self.face_count
+        stats = SpatialHashStats(reruns=self._pair_reruns)
+        if m == 1:
+            stats.entries = stats.groups = stats.cells = 1
+            stats.mean_cells_per_face = 1.0
+        elif m >= 2:
+            stats.cell_size = float(summary[kernels.SUMMARY_CELL_SIZE])
+            stats.grid_dims = tuple(int(v) for v in info[kernels.SUMMARY_DIMS: kernels.SUMMARY_DIMS + 3])
+            stats.entries = int(info[kernels.INFO_ENTRIES])
+            stats.groups = int(info[kernels.INFO_GROUPS])
+            stats.cells = int(info[kernels.INFO_CELLS])
+            stats.rows = int(info[kernels.INFO_ROWS])
+            stats.face_tests = int(info[kernels.INFO_FACE_TESTS])
+            stats.slab_tests = int(info[kernels.INFO_SLAB_TESTS])
+            stats.bv_tests = stats.face_tests + stats.slab_tests
+            stats.same_node_tests = int(info[kernels.INFO_SAME_NODE])
+            stats.triangle_pairs = int(info[kernels.SUMMARY_PAIRS])
+            stats.coarsenings = int(info[kernels.INFO_COARSENINGS])
+            stats.mean_cells_per_face = stats.entries / m
+        stats.device_bytes = self.device_bytes
+        self.stats = stats
 
     def _slab_args(self, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
-                   half_distance: float) -> kernels.SlabArgs:
-        """The slab test's launch arguments (disabled unless configured and given node ids)."""
+                   half_distance: float) -> tuple[kernels.SlabArgs, float]:
+        """The slab test's launch arguments (disabled unless configured and given node ids) and the
+        half distance as the float32 value the margin is computed from."""
         slab = kernels.SlabArgs()
         slab.enabled = 0
         slab.faces = self.faces
         slab.swept = 0
-        slab.half_distance = 0.0
-        slab.margin = 0.0
         slab.min_work = self.slab_min_work
         if not (self.group_slab_test and grouped):
             slab.positions_t0 = slab.positions_t1 = self.chunk_lower
-            return slab
+            return slab, 0.0
         for name, value in (("positions_t0", positions_t0), ("positions_t1", positions_t1)):
             if value is None:
                 if name == "positions_t0":
@@ -498,21 +688,11 @@ class SpatialHash:
         slab.positions_t0 = positions_t0
         slab.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
         slab.swept = 0 if positions_t1 is None else 1
-        slab.half_distance = half
-        return slab
-
-    @staticmethod
-    def _slab_margin(slab: kernels.SlabArgs, origin: np.ndarray, extent: np.ndarray) -> None:
-        """Set the slab growth from the scene box (it contains every face box, so every vertex):
-        M = sum_k max(|lower_k|, |upper_k|) bounds |p|_1 (``tolerances.GROUP_SLAB_RELATIVE_PAD``)."""
-        lower = origin.astype(np.float64)
-        upper = lower + extent
-        size = float(np.maximum(np.abs(lower), np.abs(upper)).sum())
-        pad = tolerances.GROUP_SLAB_RELATIVE_PAD
-        slab.margin = float(slab.half_distance * (1.0 + pad) + pad * (size + slab.half_distance))
+        return slab, float(np.float32(half))
 
     def pairs_numpy(self) -> np.ndarray:
-        """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b).
+        """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when
+        ``sort_pairs``.
 
         Allocates: yes (host copy). Capture-safe: no.
         """
@@ -520,10 +700,12 @@ class SpatialHash:
             return np.zeros((0, 2), dtype=np.int32)
         return self.pairs[: self._pair_count].numpy().reshape(-1, 2).astype(np.int32)
 
-    # ------------------------------------------------------------------ stages
+    # ------------------------------------------------------------------ stages (device path)
 
-    def _scene_bounds(self, face_lower: wp.array, face_upper: wp.array) -> tuple[np.ndarray, np.ndarray, float]:
-        """Sync point 1: min corner, extent and mean box axis length (a deterministic reduction)."""
+    def _plan(self, face_lower: wp.array, face_upper: wp.array, face_order: wp.array | None,
+              fixed_cell_size: float, half_distance: float) -> None:
+        """Scene bounds (a deterministic two-level reduction), the face order check, then the grid
+        plan: origin, slab margin, first cell size, and the grid loop's start flag."""
         dev = self.device
         wp.launch(kernels._reduce_scene_chunks, dim=self._chunk_count,
                   inputs=[face_lower, face_upper, self._chunk_size],
@@ -531,125 +713,84 @@ class SpatialHash:
         wp.launch(kernels._reduce_scene_total, dim=1,
                   inputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad,
                           self._chunk_count],
-                  outputs=[self.scene], device=dev)
-        scene = self.scene.numpy()
-        if scene[7] > 0:
-            raise InputError("argument", "face_lower/face_upper",
-                             f"{int(scene[7])} boxes hold NaN/Inf or have lower > upper on some axis",
-                             "pass finite boxes with lower <= upper")
-        origin = scene[0:3].astype(np.float32)
-        extent = scene[3:6] - scene[0:3]
-        return origin, extent, float(scene[6]) / self.face_count
+                  outputs=[self.scene, self.info], device=dev)
+        if face_order is not None:
+            m = self.face_count
+            wp.launch(kernels._clear_marks, dim=m, outputs=[self.face_cells], device=dev)
+            wp.launch(kernels._mark_face_order, dim=m, inputs=[face_order], outputs=[self.face_cells, self.info],
+                      device=dev)
+            wp.launch(kernels._check_marks, dim=m, inputs=[self.face_cells], outputs=[self.info], device=dev)
+        wp.launch(kernels._plan_grid, dim=1,
+                  inputs=[self.scene, self.face_count, self.cell_size_factor, fixed_cell_size, half_distance],
+                  outputs=[self.grid, self.info, self.loop_flag], device=dev)
 
-    def _insert_faces(
-        self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_limit: int,
-        grid: kernels.GridArgs, cell_size: float, extent: np.ndarray, order: wp.array, ordered: bool,
-        grouped_fill: bool,
-    ) -> int:
-        """Count, scan and fill the (key, face) entries, then sort them. Sync point 2.
-
-        Chooses the final cell size: doubles it while the grid or the entries are too big.
-        """
+    def _count_cells(self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_limit: int,
+                     order: wp.array, ordered: int) -> None:
+        """Body of the grid loop: count the cells of every face, scan, and let the device decide
+        whether the grid is final or the cell size doubles (``_check_grid``)."""
         dev = self.device
         m = self.face_count
         max_entries = min(MAX_ENTRIES, max(m, int(self.max_mean_cells_per_face * m)))
-        while True:
-            cell_size = float(np.float32(cell_size))
-            estimate = [extent[k] / cell_size + 2.0 for k in range(3)]
-            if not all(math.isfinite(e) for e in estimate) or math.prod(estimate) > MAX_GRID_CELLS:
-                cell_size *= 2.0
-                self.stats.coarsenings += 1
-                continue
-            self.grid_max.zero_()
-            wp.launch(kernels._count_face_cells, dim=m,
-                      inputs=[face_lower, face_upper, grid.origin, cell_size, node_id, node_limit, order,
-                              int(ordered)],
-                      outputs=[self.face_cells, self.grid_max], device=dev)
-            wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
-            wp.launch(kernels._gather_entry_info, dim=1, inputs=[self.face_end, self.grid_max],
-                      outputs=[self.entry_info], device=dev)
-            info = self.entry_info.numpy()
-            if info[4] > 0:
-                raise InputError("argument", "node_id", f"{int(info[4])} node ids lie outside [0, {node_limit})",
-                                 "pass node ids below node_id_bound, or node_id_bound=None")
-            entries = int(info[0])
-            dims = tuple(int(n) for n in info[1:4])
-            if entries > max_entries or math.prod(dims) > MAX_GRID_CELLS:
-                cell_size *= 2.0
-                self.stats.coarsenings += 1
-                continue
-            break
-        grid.cell_size = cell_size
-        grid.dims = wp.vec3i(*dims)
-        self.stats.cell_size = cell_size
-        self.stats.grid_dims = dims
-        self.stats.entries = entries
-        if entries > self.entry_capacity:
-            self._allocate_entries(min(MAX_ENTRIES, int(entries * _GROWTH)))
-        wp.launch(kernels._fill_entries, dim=m,
-                  inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, grid, order, int(ordered)],
+        wp.launch(kernels._count_face_cells, dim=m,
+                  inputs=[face_lower, face_upper, self.grid, node_id, node_limit, order, ordered],
+                  outputs=[self.face_cells, self.grid_max], device=dev)
+        wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
+        wp.launch(kernels._check_grid, dim=1,
+                  inputs=[self.face_end, self.scene, max_entries, min(MAX_GRID_CELLS, 1 << self.cell_bits),
+                          self.entry_capacity],
+                  outputs=[self.grid, self.grid_max, self.info, self.loop_flag], device=dev)
+
+    def _insert_faces(self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_bits: int,
+                      order: wp.array, ordered: bool, grouped_fill: bool) -> None:
+        """Fill the (key, face) entries, pad the rest of the capacity, sort the whole capacity."""
+        dev = self.device
+        wp.launch(kernels._fill_entries, dim=self.face_count,
+                  inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, self.grid, node_bits,
+                          order, int(ordered), self.info],
                   outputs=[self.entry_key, self.entry_face], device=dev)
-        cell_bits = max(1, (math.prod(dims) - 1).bit_length())
+        end_bit = node_bits + self.cell_bits
+        wp.launch(kernels._pad_entries, dim=self.entry_capacity, inputs=[self.info, (1 << end_bit) - 1],
+                  outputs=[self.entry_key, self.entry_face], device=dev)
         # A stable sort on the cell bits keeps the fill order inside each cell; when that order keeps
         # each node's faces together, the node bits need no sorting.
-        first_bit = grid.node_bits if grouped_fill else 0
-        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, entries, first_bit, grid.node_bits + cell_bits)
-        return entries
+        first_bit = node_bits if grouped_fill else 0
+        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, self.entry_capacity, first_bit, end_bit)
 
-    def _build_tables(self, entries: int, node_bits: int, slab: kernels.SlabArgs, check_keys: int) -> None:
-        """Run heads -> ranks -> group and cell ranges -> slab tests and work rows -> row scan.
-        Sync points 3 (group count) and 4 (cells, rows, face tests, slab tests)."""
+    def _build_tables(self, node_bits: int, slab: kernels.SlabArgs, check_keys: int) -> None:
+        """Run heads -> ranks -> group and cell ranges -> slab tests and work rows -> row scan."""
         dev = self.device
-        n = entries
-        keys = self.entry_key[:n]
-        wp.launch(kernels._mark_runs, dim=n, inputs=[keys, node_bits],
-                  outputs=[self.group_start[:n], self.cell_end[:n]], device=dev)
-        wp.utils.array_scan(self.group_start[:n], self.group_rank[:n], inclusive=True)
-        wp.utils.array_scan(self.cell_end[:n], self.cell_rank[:n], inclusive=True)
-        groups = int(self.group_rank[n - 1 : n].numpy()[0])
-        if groups > self.group_capacity:
-            self._allocate_groups(int(groups * _GROWTH) + 1)
-        wp.launch(kernels._write_tables, dim=n, inputs=[keys, self.group_rank[:n], self.cell_rank[:n], node_bits],
+        n = self.entry_capacity
+        g = self.group_capacity
+        wp.launch(kernels._mark_runs, dim=n, inputs=[self.entry_key, node_bits, self.info],
+                  outputs=[self.group_start, self.cell_end], device=dev)
+        wp.utils.array_scan(self.group_start, self.group_rank, inclusive=True)
+        wp.utils.array_scan(self.cell_end, self.cell_rank, inclusive=True)
+        wp.launch(kernels._write_tables, dim=n,
+                  inputs=[self.entry_key, self.group_rank, self.cell_rank, node_bits, self.info],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
-        wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank[:n], self.cell_rank[:n]],
-                  outputs=[self.table_info], device=dev)
+        wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, g],
+                  outputs=[self.info], device=dev)
         if slab.enabled:
-            wp.launch(kernels._compute_group_slabs, dim=groups,
+            wp.launch(kernels._compute_group_slabs, dim=g,
                       inputs=[self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                              slab],
+                              slab, self.info],
                       outputs=[self.group_axis, self.group_slab], device=dev)
-        # The rank buffers are free once the tables are written: they hold the rows per group.
-        row_count = self.group_rank[:groups]
-        row_end = self.cell_rank[:groups]
-        self.work_counts.zero_()
-        wp.launch(kernels._plan_rows, dim=groups,
-                  inputs=[groups, self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
-                          self.cell_end, self.group_axis, self.group_slab, slab, check_keys],
-                  outputs=[self.group_mask, row_count, self.work_counts], device=dev)
-        wp.utils.array_scan(row_count, row_end, inclusive=True)
-        wp.launch(kernels._gather_row_info, dim=1, inputs=[row_end, self.work_counts], outputs=[self.table_info],
-                  device=dev)
-        info = self.table_info.numpy()
-        rows = int(info[2])
-        self.stats.groups = int(info[0])
-        self.stats.cells = int(info[1])
-        self.stats.rows = rows
-        self.stats.face_tests = int(info[3])
-        self.stats.slab_tests = int(info[4])
-        self.stats.bv_tests = self.stats.face_tests + self.stats.slab_tests
-        self.stats.same_node_tests = int(info[5])
-        if rows == 0:
-            return
-        if rows > self.row_capacity:
-            self._allocate_rows(int(rows * _GROWTH) + 1)
-        wp.launch(kernels._write_rows, dim=groups,
-                  inputs=[groups, self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_mask, slab.enabled, check_keys, row_count, row_end],
+        wp.launch(kernels._plan_rows, dim=g,
+                  inputs=[self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
+                          self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys],
+                  outputs=[self.group_mask, self.row_count, self.info], device=dev)
+        wp.utils.array_scan(self.row_count, self.row_end, inclusive=True)
+        wp.launch(kernels._gather_row_info, dim=1,
+                  inputs=[self.row_end, self.row_capacity, self.test_threads, self.tests_per_thread],
+                  outputs=[self.info], device=dev)
+        wp.launch(kernels._write_rows, dim=g,
+                  inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
+                          self.group_mask, slab.enabled, check_keys, self.row_count, self.row_end, self.info],
                   outputs=[self.row_span, self.row_work], device=dev)
-        wp.utils.array_scan(self.row_work[:rows], self.row_scan[:rows], inclusive=True)
+        wp.utils.array_scan(self.row_work, self.row_scan, inclusive=True)
 
-    def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, grid: kernels.GridArgs) -> None:
-        """One thread per BV test, in batches; grows the pair buffer and re-runs on overflow. Sync point 5."""
+    def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, node_bits: int) -> None:
+        """The test pass: ``test_threads`` threads, each a contiguous chunk of the live BV tests."""
         tables = kernels.TableArgs()
         tables.entry_key = self.entry_key
         tables.entry_face = self.entry_face
@@ -658,37 +799,16 @@ class SpatialHash:
         tables.row_span = self.row_span
         tables.row_work = self.row_work
         tables.row_scan = self.row_scan
-        tables.row_count = self.stats.rows
-        total = self.stats.face_tests
-        while True:
-            self.counts.zero_()
-            per_thread = self.tests_per_thread
-            for first in range(0, total, self.tests_per_launch):
-                end = min(total, first + self.tests_per_launch)
-                threads = (end - first + per_thread - 1) // per_thread
-                wp.launch(kernels._test_bounding_volumes, dim=threads,
-                          inputs=[face_lower, face_upper, self.faces, int(self.skip_adjacent), grid,
-                                  tables, first, end, per_thread, self.pair_capacity],
-                          outputs=[self.counts, self.pairs], device=self.device)
-            counts = self.counts.numpy()
-            found = int(counts[0])
-            if found <= self.pair_capacity:
-                break
-            if found > MAX_PAIRS:
-                raise CapacityError(f"spatial hash pair buffer: {found} pairs exceed {MAX_PAIRS}; "
-                                    "use smaller boxes or split the scene")
-            self._allocate_pairs(min(MAX_PAIRS, int(found * _GROWTH)))
-            self.stats.reruns += 1
-        self._pair_count = found
-        self.stats.triangle_pairs = found
+        wp.launch(kernels._test_bounding_volumes, dim=self.test_threads,
+                  inputs=[face_lower, face_upper, self.faces, int(self.skip_adjacent), self.grid, node_bits,
+                          tables, self.info, self.pair_capacity],
+                  outputs=[self.counts, self.pairs], device=self.device)
 
     def _sort_pairs(self) -> None:
-        """Radix-sort the emitted pairs on a * face_count + b, so the output is deterministic."""
-        count = self._pair_count
-        if count == 0:
-            return
+        """Radix-sort the whole pair capacity on a * face_count + b (unused slots last), so the
+        output is deterministic."""
         m = self.face_count
-        wp.launch(kernels._compute_pair_keys, dim=count, inputs=[self.pairs, m], outputs=[self.pair_keys],
-                  device=self.device)
         key_bits = max(1, (m * m - 1).bit_length())
-        wp.utils.radix_sort_pairs(self.pair_keys, self.pairs, count, 0, key_bits)
+        wp.launch(kernels._compute_pair_keys, dim=self.pair_capacity, inputs=[self.counts, m, (1 << key_bits) - 1],
+                  outputs=[self.pairs, self.pair_keys], device=self.device)
+        wp.utils.radix_sort_pairs(self.pair_keys, self.pairs, self.pair_capacity, 0, key_bits)

@@ -20,9 +20,12 @@ The gap is ``g = n . sum_i w_i x_i - h``. While ``g < 0`` the integrator applies
 friction as an implicit tangential damper (see :class:`pscc.sim.ImplicitEuler`).
 
 Producers either upload pairs from the host (:meth:`ContactSprings.set`) or append on the device with
-``wp.atomic_add(count, 0, 1)``, writing only below capacity; the counter keeps counting past the
-capacity, and :meth:`ContactSprings.fits` (a sync point) grows the buffers to the exact size needed
-before the producer runs again. Nothing overflows silently.
+``wp.atomic_add(count, 0, 1)`` (e.g. :meth:`pscc.sim.proximity.ProximityContacts.update_device`),
+writing only below capacity; the counter keeps counting past the capacity, and
+:meth:`ContactSprings.fits` (a sync point) grows the buffers to 1.25 times the size needed before the
+producer runs again. Nothing overflows silently. The count lives on the device only: consumers read
+``count`` in their kernels (:mod:`pscc.sim.assembly` launches at capacity and clamps), and
+:attr:`ContactSprings.host_count` is a sync read of it.
 """
 
 from __future__ import annotations
@@ -67,7 +70,6 @@ class ContactSprings:
         """(capacity,) vec3 unit normals of each contact."""
         self.count = wp.zeros(1, dtype=wp.int32, device=self.device)
         """(1,) int32 number of contacts stored (may exceed capacity after an overflowing append)."""
-        self._host_count = 0
 
     @property
     def capacity(self) -> int:
@@ -76,24 +78,25 @@ class ContactSprings:
 
     @property
     def host_count(self) -> int:
-        """Contacts known on the host (after :meth:`set` or :meth:`fits`); no sync."""
-        return self._host_count
+        """Contacts stored: the device counter clamped to the capacity.
+
+        Sync point: reads one integer back (device code reads :attr:`count` instead).
+        """
+        return max(0, min(int(self.count.numpy()[0]), self.capacity))
 
     def set_count(self, count: int) -> None:
-        """Record that a producer filled rows [0, count) of the buffers (device counter and host mirror).
+        """Record that a producer filled rows [0, count) of the buffers (writes the device counter).
 
         Allocates: no. Capture-safe: no (uploads the value).
         """
         if isinstance(count, bool) or not isinstance(count, int | np.integer) or not 0 <= count <= self.capacity:
             raise InputError("argument", "count", f"{count!r} is not an integer in [0, {self.capacity}]",
                              "call ensure(count) before filling the buffers")
-        self.count.assign(np.array([count], dtype=np.int32))
-        self._host_count = int(count)
+        self.count.fill_(int(count))
 
     def reset(self) -> None:
         """Drop every contact (zero the counter). Allocates: no. Capture-safe: yes."""
         self.count.zero_()
-        self._host_count = 0
 
     def fits(self) -> bool:
         """Read the counter (a sync point) and grow the buffers when a producer overflowed them.
@@ -110,7 +113,6 @@ class ContactSprings:
         count = int(self.count.numpy()[0])
         if count < 0:
             raise CapacityError("contact counter overflowed int32; reduce the thickness or split the scene")
-        self._host_count = count
         if count <= self.capacity:
             return True
         self.ensure(count)

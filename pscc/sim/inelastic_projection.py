@@ -42,6 +42,18 @@ The solver then runs CCD again; constraints it cannot meet (a free vertex squeez
 kinematic objects) are left to the rigid impact zones
 (:class:`pscc.sim.impact_response.ImpactZones`) and, at last, to a smaller step.
 
+**Device path.** :meth:`InelasticProjection.add_device` appends the hits of a narrow phase's rows
+(:class:`pscc.collision.contacts.ContactArgs`) with a device counter, and
+:meth:`InelasticProjection.solve_device` runs the iteration as a ``wp.capture_while`` loop whose
+convergence and restart checks run on the device (one thread, every ``check_every`` iterations);
+the FISTA sequence is kept in float64 on the device, so the iterates are the same bits as those of
+a host-driven loop. Kernels launch at the buffers' capacity and stop at the counter. Nothing is read
+back: the result (iterations, violation, converged) stays in ``loop_state`` / ``scalars`` until
+:meth:`InelasticProjection.result` reads it, and an overflow of the constraint buffers keeps
+counting until :meth:`InelasticProjection.check_capacity` grows them (both sync points). The host
+methods :meth:`~InelasticProjection.add` and :meth:`~InelasticProjection.solve` are the device path
+followed by those sync methods.
+
 Momentum: every constraint's correction ``M^-1 w_k n_k lambda_k`` has zero total momentum when all
 its vertices are free (the weights sum to zero), as for an inelastic impulse.
 """
@@ -53,189 +65,30 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from pscc.geometry.contact_weights import pair_plane_normal, pair_weights, weighted_sum
+from pscc.collision.contacts import ContactArgs
+from pscc.errors import CapacityError
+from pscc.sim._projection_kernels import (
+    _ACTIVE,
+    _ALWAYS,
+    _CONVERGED,
+    _GROWTH,
+    _INITIAL_CAPACITY,
+    _ITERATIONS,
+    _LOOP_SLOTS,
+    _VIOLATION,
+    ConstraintArgs,
+    _append_constraints,
+    _begin_iteration,
+    _close_block,
+    _dual_steps,
+    _dual_update,
+    _primal_update,
+    _settle,
+    _start_solve,
+    _weight_sums,
+)
 
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func
-def _normal_or_fallback(offset: wp.vec3, fallback: wp.vec3, start_offset: wp.vec3) -> wp.vec3:
-    """Unit contact normal: the closest-point offset, else ``fallback`` oriented like the start."""
-    length = wp.length(offset)
-    if length > 1.0e-12:
-        return offset / length
-    n = fallback
-    if wp.length(n) <= 1.0e-20:
-        n = start_offset
-    if wp.length(n) <= 1.0e-20:
-        n = wp.vec3(0.0, 0.0, 1.0)
-    n = wp.normalize(n)
-    if wp.dot(n, start_offset) < 0.0:
-        n = -n
-    return n
-
-
-@wp.kernel
-def _pair_constraints(
-    # in:
-    pairs: wp.array(dtype=wp.vec4i),
-    toi: wp.array(dtype=float),
-    positions_t0: wp.array(dtype=wp.vec3),
-    positions_t1: wp.array(dtype=wp.vec3),
-    first: int,
-    edge_edge: int,
-    # out:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-):
-    """One thread per colliding pair (vertex-face (p, a, b, c), or edge-edge (a0, a1, b0, b1) when
-    ``edge_edge`` is not 0): its constraint, linearised at the time of impact, at slot first + i."""
-    i = wp.tid()
-    ids = pairs[i]
-    s = toi[i]
-    x0 = wp.lerp(positions_t0[ids[0]], positions_t1[ids[0]], s)
-    x1 = wp.lerp(positions_t0[ids[1]], positions_t1[ids[1]], s)
-    x2 = wp.lerp(positions_t0[ids[2]], positions_t1[ids[2]], s)
-    x3 = wp.lerp(positions_t0[ids[3]], positions_t1[ids[3]], s)
-    w = pair_weights(x0, x1, x2, x3, edge_edge)
-    start = weighted_sum(w, positions_t0[ids[0]], positions_t0[ids[1]], positions_t0[ids[2]], positions_t0[ids[3]])
-    vertices[first + i] = ids
-    weights[first + i] = w
-    normals[first + i] = _normal_or_fallback(weighted_sum(w, x0, x1, x2, x3),
-                                             pair_plane_normal(x0, x1, x2, x3, edge_edge), start)
-
-
-@wp.kernel
-def _weight_sums(
-    # in:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    # out:
-    weight_sum: wp.array(dtype=float),
-):
-    """One thread per constraint: S_i += |w_ki| for its four vertices."""
-    k = wp.tid()
-    ids = vertices[k]
-    w = weights[k]
-    for j in range(4):
-        wp.atomic_add(weight_sum, ids[j], wp.abs(w[j]))
-
-
-@wp.kernel
-def _dual_steps(
-    # in:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    inverse_mass: wp.array(dtype=float),
-    weight_sum: wp.array(dtype=float),
-    # out:
-    step: wp.array(dtype=float),
-):
-    """One thread per constraint: 1 / D_k (0 when every vertex is kinematic)."""
-    k = wp.tid()
-    ids = vertices[k]
-    w = weights[k]
-    bound = float(0.0)
-    for j in range(4):
-        bound += wp.abs(w[j]) * inverse_mass[ids[j]] * weight_sum[ids[j]]
-    if bound > 0.0:
-        step[k] = 1.0 / bound
-    else:
-        step[k] = 0.0
-
-
-@wp.kernel
-def _dual_update(
-    # in:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-    step: wp.array(dtype=float),
-    positions_t1: wp.array(dtype=wp.vec3),
-    separation: float,
-    momentum: float,
-    measure: int,
-    # in/out:
-    multiplier: wp.array(dtype=float),
-    extrapolated: wp.array(dtype=float),
-    # out:
-    change: wp.array(dtype=float),
-    violation: wp.array(dtype=float),
-    restart: wp.array(dtype=float),
-):
-    """One thread per constraint: one accelerated projected dual step.
-
-    ``positions_t1`` are the positions of the extrapolated multipliers y. The new multiplier is
-    lambda' = max(0, y + deficit / D_k), the new extrapolation y' = lambda' + momentum (lambda' - lambda);
-    ``change`` = y' - y for the primal update. When ``measure`` is not 0 it also records the largest
-    deficit (primal feasibility), the largest excess gap of a constraint with lambda' > 0
-    (complementarity) and the restart indicator sum (y - lambda') (lambda' - lambda) (> 0: the momentum
-    points uphill)."""
-    k = wp.tid()
-    if step[k] == 0.0:
-        change[k] = 0.0
-        return
-    ids = vertices[k]
-    w = weights[k]
-    n = normals[k]
-    gap = float(0.0)
-    for j in range(4):
-        gap += w[j] * wp.dot(n, positions_t1[ids[j]])
-    deficit = separation - gap
-    old = multiplier[k]
-    y = extrapolated[k]
-    new = wp.max(y + deficit * step[k], 0.0)
-    if measure != 0:
-        wp.atomic_max(violation, 0, deficit)
-        if new > 0.0:
-            wp.atomic_max(violation, 1, -deficit)
-        wp.atomic_add(restart, 0, (y - new) * (new - old))
-    y_new = new + momentum * (new - old)
-    multiplier[k] = new
-    extrapolated[k] = y_new
-    change[k] = y_new - y
-
-
-@wp.kernel
-def _settle(
-    # in:
-    multiplier: wp.array(dtype=float),
-    # in/out:
-    extrapolated: wp.array(dtype=float),
-    # out:
-    change: wp.array(dtype=float),
-):
-    """One thread per constraint: drop the momentum (y = lambda); ``change`` = lambda - y."""
-    k = wp.tid()
-    change[k] = multiplier[k] - extrapolated[k]
-    extrapolated[k] = multiplier[k]
-
-
-@wp.kernel
-def _primal_update(
-    # in:
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-    change: wp.array(dtype=float),
-    inverse_mass: wp.array(dtype=float),
-    # out:
-    positions_t1: wp.array(dtype=wp.vec3),
-):
-    """One thread per constraint: x += M^-1 w_k n_k (change of lambda_k)."""
-    k = wp.tid()
-    delta = change[k]
-    if delta == 0.0:
-        return
-    ids = vertices[k]
-    w = weights[k]
-    n = normals[k]
-    for j in range(4):
-        scale = inverse_mass[ids[j]] * w[j] * delta
-        if scale != 0.0:
-            wp.atomic_add(positions_t1, ids[j], scale * n)
-
 
 @dataclass(frozen=True)
 class ProjectionResult:
@@ -249,35 +102,83 @@ class ProjectionResult:
     converged to the projection within tolerance)."""
     constraints: int
     """Constraints of the step so far."""
+    converged: bool = False
+    """Whether the last check met the tolerance (True when there was nothing to project)."""
+
+
+class _SolveLaunches:
+    """The solve's launches, packed once per (positions, separation, tolerance) (no ``__dict__``, so
+    memory accounting does not walk into them)."""
+
+    __slots__ = ("key", "positions_t1", "weight_sums", "dual_steps", "start", "begin", "dual", "primal", "close",
+                 "settle", "settle_primal")
 
 
 class InelasticProjection:
     """Inelastic projection of the end positions onto the step's collision constraints (see the
     module docstring).
 
-    Use per step: :meth:`reset`, then per CCD round :meth:`add` the colliding pairs and
-    :meth:`solve`.
+    Use per step: :meth:`reset`, then per CCD round :meth:`add` (or :meth:`add_device`) the colliding
+    pairs and :meth:`solve` (or :meth:`solve_device`).
+
+    Device buffers (capacity ``C`` constraint slots, grown only by :meth:`check_capacity`):
+
+    ==================  ===============  ===========================================================
+    buffer              shape, dtype     meaning
+    ==================  ===============  ===========================================================
+    vertices            (C,) vec4i       the four vertex ids of each constraint
+    weights             (C,) vec4        signed weights w_k
+    normals             (C,) vec3        unit contact normal n_k at the time of impact
+    multiplier          (C,) float32     lambda_k (kept across solves of a step: warm start)
+    extrapolated        (C,) float32     y_k, the extrapolated multipliers
+    step, change        (C,) float32     1 / D_k; the last change of y_k
+    constraint_count    (1,) int32       constraints appended since :meth:`reset`; may exceed ``C``
+                                         (an overflow, caught by :meth:`check_capacity`)
+    loop_state          (7,) int32       [iterations, active, measure, measured, stopped, converged, 1]
+                                         (``iteration_count`` is a view of slot 0)
+    scalars             (2,) float32     [momentum, violation at the last check]
+    running             (1,) int32       the ``wp.capture_while`` condition
+    ==================  ===============  ===========================================================
+
+    Sync points: :meth:`check_capacity`, :meth:`result`, :attr:`count`, and the host methods
+    :meth:`add` / :meth:`solve` that call them.
 
     Args:
         inverse_mass: (vertex_count,) 1 / mass [1/kg] in the collision index space; 0 for kinematic
             vertices (pins, handles, obstacles), which are never moved.
         device: Warp device.
         max_iterations: dual iterations per :meth:`solve` at most.
-        check_every: iterations between two convergence checks (each check reads three floats back).
+        check_every: iterations between two convergence checks (on the device; run eagerly, the loop
+            reads its one-integer condition once per ``check_every`` iterations).
     """
 
-    def __init__(self, inverse_mass: np.ndarray, device: wp.Device, max_iterations: int = 512,
+    def __init__(self, inverse_mass: np.ndarray, device: wp.DeviceLike, max_iterations: int = 512,
                  check_every: int = 16) -> None:
-        self.device = device
+        self.device = wp.get_device(device)
+        dev = self.device
         self.vertex_count = int(inverse_mass.shape[0])
-        self.inverse_mass = wp.array(np.asarray(inverse_mass, dtype=np.float32), dtype=float, device=device)
+        self.inverse_mass = wp.array(np.asarray(inverse_mass, dtype=np.float32), dtype=float, device=dev)
         self.max_iterations = int(max_iterations)
         self.check_every = max(1, int(check_every))
-        self.weight_sum = wp.zeros(self.vertex_count, dtype=float, device=device)
-        self.violation = wp.zeros(2, dtype=float, device=device)
-        self.restart = wp.zeros(1, dtype=float, device=device)
-        self.count = 0
-        self._allocate(64)
+        self.weight_sum = wp.zeros(self.vertex_count, dtype=float, device=dev)
+        self.violation = wp.zeros(2, dtype=float, device=dev)
+        """(2,) float32 [largest deficit, largest excess] of the measuring iteration."""
+        self.restart = wp.zeros(1, dtype=float, device=dev)
+        """(1,) float32 restart indicator of the measuring iteration."""
+        self.constraint_count = wp.zeros(1, dtype=wp.int32, device=dev)
+        """(1,) int32 constraints appended since :meth:`reset` (may exceed :attr:`capacity`)."""
+        self.loop_state = wp.zeros(_LOOP_SLOTS, dtype=wp.int32, device=dev)
+        """(7,) int32 loop state of the last solve (slots in the class docstring)."""
+        self.iteration_count = self.loop_state[_ITERATIONS:_ITERATIONS + 1]
+        """(1,) int32 view of ``loop_state``: dual iterations of the last :meth:`solve_device`."""
+        self.fista = wp.zeros(1, dtype=wp.float64, device=dev)
+        """(1,) float64 the FISTA sequence t_k."""
+        self.scalars = wp.zeros(2, dtype=float, device=dev)
+        """(2,) float32 [momentum, violation at the last check]."""
+        self.running = wp.zeros(1, dtype=wp.int32, device=dev)
+        """(1,) int32 loop condition of :meth:`solve_device`."""
+        self._launches: _SolveLaunches | None = None
+        self._allocate(_INITIAL_CAPACITY)
 
     def _allocate(self, capacity: int) -> None:
         dev = self.device
@@ -289,25 +190,105 @@ class InelasticProjection:
         self.extrapolated = wp.zeros(capacity, dtype=float, device=dev)
         self.step = wp.zeros(capacity, dtype=float, device=dev)
         self.change = wp.zeros(capacity, dtype=float, device=dev)
+        args = ConstraintArgs()
+        args.vertices = self.vertices
+        args.weights = self.weights
+        args.normals = self.normals
+        args.step = self.step
+        args.count = self.constraint_count
+        self.constraints = args
+        """The constraint buffers as a :class:`ConstraintArgs` (rebuilt when they grow)."""
+        self._launches = None
 
     def _grow(self, needed: int) -> None:
+        """Grow to ``1.25 * needed`` slots, keeping every stored constraint and multiplier."""
         if needed <= self.capacity:
             return
+        size = int(needed * _GROWTH) + _INITIAL_CAPACITY
+        if size > 2**31 - 1:
+            raise CapacityError(f"inelastic projection: {needed} constraints exceed the int32 index range; "
+                                "reduce the time step or split the scene")
         old = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
-        self._allocate(max(needed, 2 * self.capacity))
+        kept = self.capacity
+        self._allocate(size)
         new = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
         for src, dst in zip(old, new, strict=True):
-            if self.count:
-                wp.copy(dst, src, count=self.count)
+            wp.copy(dst, src, count=kept)
+
+    @property
+    def count(self) -> int:
+        """Constraints stored since :meth:`reset` (the device counter clamped to the capacity).
+
+        Sync point: reads one integer back.
+        """
+        return max(0, min(int(self.constraint_count.numpy()[0]), self.capacity))
+
+    def reserve(self, capacity: int) -> None:
+        """Grow the buffers to at least ``capacity`` constraints (1.25 x), keeping the stored ones.
+
+        Allocates: when growing. Capture-safe: no.
+        """
+        self._grow(int(capacity))
 
     def reset(self) -> None:
-        """Forget the constraints (start of a step). Allocates: no."""
-        self.count = 0
+        """Forget the constraints (start of a step). Allocates: no. Capture-safe: yes."""
+        self.constraint_count.zero_()
+
+    def check_capacity(self) -> bool:
+        """Read the constraint counter and grow the buffers when :meth:`add_device` overflowed them.
+
+        Sync point: reads one integer back.
+
+        Returns:
+            True when every constraint was stored; False when the buffers were grown (to 1.25 times
+            the count, contents kept), in which case the constraints past the old capacity were lost:
+            the caller re-runs the step (:meth:`reset`, then every round's :meth:`add_device`).
+
+        Raises:
+            CapacityError: the counter overflowed int32.
+
+        Allocates: only when growing. Capture-safe: no.
+        """
+        count = int(self.constraint_count.numpy()[0])
+        if count < 0:
+            raise CapacityError("inelastic projection: the constraint counter overflowed int32; reduce the time "
+                                "step or split the scene")
+        if count <= self.capacity:
+            return True
+        self._grow(count)
+        return False
+
+    def overflow_counters(self) -> list[tuple[wp.array, int, int]]:
+        """``(counter, index, capacity)`` of each device counter that can overflow (for a device-side
+        overflow flag): ``constraint_count[0]`` against :attr:`capacity`. Allocates: no."""
+        return [(self.constraint_count, 0, self.capacity)]
+
+    def add_device(self, contacts: ContactArgs, positions_t0: wp.array, positions_t1: wp.array) -> None:
+        """Append one constraint per hit row of ``contacts`` (toi <= 1), linearised at its time of
+        impact on the current trajectory ``positions_t0 -> positions_t1``.
+
+        Vertex-face rows come first, then edge-edge rows, each in row order on the CPU (in the order
+        of the device's atomic appends on a GPU). The counter :attr:`constraint_count` counts past
+        the capacity; :meth:`check_capacity` (a sync point) reports and grows.
+
+        Args:
+            contacts: the narrow phase's rows (:class:`pscc.collision.contacts.ContactArgs`; vertex
+                ids index ``positions_*``).
+            positions_t0: (vertex_count,) vec3 start positions [m].
+            positions_t1: (vertex_count,) vec3 current end positions [m].
+
+        Allocates: no. Capture-safe: yes.
+        """
+        dev = self.device
+        for edge_edge, rows in ((0, contacts.vertex_face), (1, contacts.edge_edge)):
+            wp.launch(_append_constraints, dim=rows.shape[0],
+                      inputs=[contacts, positions_t0, positions_t1, edge_edge],
+                      outputs=[self.constraints, self.multiplier, self.extrapolated], device=dev)
 
     def add(self, vertex_face: np.ndarray, vertex_face_toi: np.ndarray, edge_edge: np.ndarray,
             edge_edge_toi: np.ndarray, positions_t0: wp.array, positions_t1: wp.array) -> None:
         """Append one constraint per colliding pair, linearised at its time of impact on the current
-        trajectory ``positions_t0 -> positions_t1``.
+        trajectory ``positions_t0 -> positions_t1`` (:meth:`add_device` on uploaded rows).
 
         Args:
             vertex_face: (k, 4) int rows (vertex, face vertex a, b, c).
@@ -317,25 +298,121 @@ class InelasticProjection:
             positions_t0: start positions (device, vec3).
             positions_t1: current end positions (device, vec3).
 
-        Allocates: uploads the pairs; grows the constraint buffers (doubling) when full.
+        Allocates: uploads the pairs; grows the constraint buffers when full. Capture-safe: no (a sync
+        point: reads the constraint counter).
         """
-        added = int(vertex_face.shape[0]) + int(edge_edge.shape[0])
-        self._grow(self.count + added)
+        vf = np.ascontiguousarray(vertex_face, dtype=np.int32).reshape(-1, 4)
+        ee = np.ascontiguousarray(edge_edge, dtype=np.int32).reshape(-1, 4)
+        k, l = int(vf.shape[0]), int(ee.shape[0])
+        if k + l == 0:
+            return
         dev = self.device
-        for kind, rows, toi in ((0, vertex_face, vertex_face_toi), (1, edge_edge, edge_edge_toi)):
-            if rows.shape[0] == 0:
-                continue
-            pairs = wp.array(np.ascontiguousarray(rows, dtype=np.int32), dtype=wp.vec4i, device=dev)
-            times = wp.array(np.ascontiguousarray(toi, dtype=np.float32), dtype=float, device=dev)
-            wp.launch(_pair_constraints, dim=rows.shape[0],
-                      inputs=[pairs, times, positions_t0, positions_t1, self.count, kind],
-                      outputs=[self.vertices, self.weights, self.normals], device=dev)
-            self.multiplier[self.count:self.count + rows.shape[0]].zero_()
-            self.extrapolated[self.count:self.count + rows.shape[0]].zero_()
-            self.count += int(rows.shape[0])
+        # The rows as a ContactArgs: one face per vertex-face row, two edges per edge-edge row.
+        contacts = ContactArgs()
+        contacts.faces = wp.array(vf[:, 1:].copy(), dtype=wp.vec3i, device=dev)
+        contacts.edges = wp.array(ee.reshape(-1, 2), dtype=wp.vec2i, device=dev)
+        contacts.vertex_face = wp.array(np.stack([vf[:, 0], np.arange(k, dtype=np.int32)], axis=1), dtype=wp.vec2i,
+                                        device=dev)
+        pairs = np.arange(2 * l, dtype=np.int32).reshape(-1, 2)
+        contacts.edge_edge = wp.array(pairs, dtype=wp.vec2i, device=dev)
+        # Times of impact clamped to [0, 1] only by the caller's contract; a row is a hit iff toi <= 1.
+        contacts.vertex_face_toi = wp.array(np.asarray(vertex_face_toi, dtype=np.float32).reshape(-1), dtype=float,
+                                            device=dev)
+        contacts.edge_edge_toi = wp.array(np.asarray(edge_edge_toi, dtype=np.float32).reshape(-1), dtype=float,
+                                          device=dev)
+        contacts.counts = wp.array(np.array([k, l], dtype=np.int32), dtype=wp.int32, device=dev)
+        before = self.count
+        self._grow(before + k + l)
+        while True:
+            self.add_device(contacts, positions_t0, positions_t1)
+            if self.check_capacity():
+                return
+            self.constraint_count.fill_(before)  # rewind: the stored constraints below are kept
+
+    def _solve_launches(self, positions_t1: wp.array, separation: float, tolerance: float) -> _SolveLaunches:
+        key = (positions_t1.ptr, positions_t1.shape, float(separation), float(tolerance))
+        cached = self._launches
+        if cached is not None and cached.key == key and cached.positions_t1 is positions_t1:
+            return cached
+        dev = self.device
+        cap = self.capacity
+        constraints = self.constraints
+        tol = wp.float64(float(tolerance))
+        launches = _SolveLaunches()
+        launches.key = key
+        launches.positions_t1 = positions_t1  # kept alive, so its address cannot be reused meanwhile
+        launches.weight_sums = wp.launch(_weight_sums, dim=cap, inputs=[constraints], outputs=[self.weight_sum],
+                                         device=dev, record_cmd=True)
+        launches.dual_steps = wp.launch(_dual_steps, dim=cap, inputs=[self.inverse_mass, self.weight_sum],
+                                        outputs=[constraints], device=dev, record_cmd=True)
+        launches.start = wp.launch(_start_solve, dim=1, inputs=[constraints, self.max_iterations],
+                                   outputs=[self.loop_state, self.fista, self.scalars, self.running], device=dev,
+                                   record_cmd=True)
+        launches.begin = wp.launch(_begin_iteration, dim=1, inputs=[tol, self.max_iterations, self.check_every],
+                                   outputs=[self.loop_state, self.fista, self.scalars, self.violation, self.restart],
+                                   device=dev, record_cmd=True)
+        launches.dual = wp.launch(_dual_update, dim=cap,
+                                  inputs=[constraints, positions_t1, float(separation), self.loop_state, self.scalars],
+                                  outputs=[self.multiplier, self.extrapolated, self.change, self.violation,
+                                           self.restart], device=dev, record_cmd=True)
+        launches.primal = wp.launch(_primal_update, dim=cap,
+                                    inputs=[constraints, self.change, self.inverse_mass, self.loop_state, _ACTIVE],
+                                    outputs=[positions_t1], device=dev, record_cmd=True)
+        launches.close = wp.launch(_close_block, dim=1, inputs=[tol, self.max_iterations],
+                                   outputs=[self.loop_state, self.fista, self.scalars, self.violation, self.restart,
+                                            self.running], device=dev, record_cmd=True)
+        launches.settle = wp.launch(_settle, dim=cap, inputs=[constraints, self.multiplier],
+                                    outputs=[self.extrapolated, self.change], device=dev, record_cmd=True)
+        launches.settle_primal = wp.launch(_primal_update, dim=cap,
+                                           inputs=[constraints, self.change, self.inverse_mass, self.loop_state,
+                                                   _ALWAYS],
+                                           outputs=[positions_t1], device=dev, record_cmd=True)
+        self._launches = launches
+        return launches
+
+    def solve_device(self, positions_t1: wp.array, separation: float, tolerance: float) -> None:
+        """Project ``positions_t1`` (updated in place) onto every constraint added since :meth:`reset`,
+        entirely on the device (see :meth:`solve` for the arguments and the warm start).
+
+        The loop is a ``wp.capture_while`` on :attr:`running`: blocks of ``check_every`` iterations,
+        the first of each (and the last iteration) measuring the KKT violation; a one-thread kernel
+        stops the loop at ``tolerance`` or restarts the momentum. Kernels launch at the capacity and
+        stop at :attr:`constraint_count`. The outcome stays on the device (:meth:`result` reads it).
+
+        Allocates: no. Capture-safe: yes (the graph binds ``positions_t1`` and the constraint buffers;
+        recapture after :meth:`check_capacity` grew them).
+        """
+        launches = self._solve_launches(positions_t1, separation, tolerance)
+        self.weight_sum.zero_()
+        launches.weight_sums.launch()
+        launches.dual_steps.launch()
+        launches.start.launch()
+
+        def block() -> None:
+            for _ in range(self.check_every):
+                launches.begin.launch()
+                launches.dual.launch()
+                # The positions always follow the extrapolated multipliers.
+                launches.primal.launch()
+            launches.close.launch()
+
+        wp.capture_while(self.running, block)
+        # Back to the positions of the multipliers themselves, so a later solve can warm-start.
+        launches.settle.launch()
+        launches.settle_primal.launch()
+
+    def result(self) -> ProjectionResult:
+        """The outcome of the last :meth:`solve_device`. Sync point: reads 12 numbers back.
+
+        Allocates: no. Capture-safe: no.
+        """
+        state = self.loop_state.numpy()
+        violation = float(self.scalars.numpy()[_VIOLATION])
+        return ProjectionResult(int(state[_ITERATIONS]), violation, self.count, bool(state[_CONVERGED]))
 
     def solve(self, positions_t1: wp.array, separation: float, tolerance: float) -> ProjectionResult:
-        """Project ``positions_t1`` (updated in place) onto every constraint added since :meth:`reset`.
+        """Project ``positions_t1`` (updated in place) onto every constraint added since :meth:`reset`
+        (:meth:`solve_device`, then :meth:`result`).
 
         The multipliers of earlier constraints are kept (warm start), and ``positions_t1`` must be
         the previous :meth:`solve`'s output (or the integrator's end positions after :meth:`reset`),
@@ -352,47 +429,7 @@ class InelasticProjection:
             Iterations run and the violation measured at the last check (before that iteration's
             update).
 
-        Allocates: no. Capture-safe: no (reads the violation back every ``check_every`` iterations).
+        Allocates: no. Capture-safe: no (reads the result back once).
         """
-        count = self.count
-        if count == 0:
-            return ProjectionResult(0, 0.0, 0)
-        dev = self.device
-        self.weight_sum.zero_()
-        constraint = (self.vertices, self.weights)
-        wp.launch(_weight_sums, dim=count, inputs=list(constraint), outputs=[self.weight_sum], device=dev)
-        wp.launch(_dual_steps, dim=count, inputs=[*constraint, self.inverse_mass, self.weight_sum],
-                  outputs=[self.step], device=dev)
-        iterations = 0
-        violation = float("inf")
-        momentum_step = 1.0  # the FISTA sequence t_k; 1 = no momentum (start, restart)
-        while iterations < self.max_iterations:
-            check = (iterations % self.check_every == 0) or iterations + 1 == self.max_iterations
-            if check:
-                self.violation.fill_(-np.inf)
-                self.restart.zero_()
-            following = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * momentum_step * momentum_step))
-            momentum = (momentum_step - 1.0) / following
-            momentum_step = following
-            wp.launch(_dual_update, dim=count,
-                      inputs=[*constraint, self.normals, self.step, positions_t1, float(separation), float(momentum),
-                              int(check)],
-                      outputs=[self.multiplier, self.extrapolated, self.change, self.violation, self.restart],
-                      device=dev)
-            # The positions always follow the extrapolated multipliers.
-            wp.launch(_primal_update, dim=count,
-                      inputs=[*constraint, self.normals, self.change, self.inverse_mass],
-                      outputs=[positions_t1], device=dev)
-            iterations += 1
-            if check:
-                deficit, excess = (float(v) for v in self.violation.numpy())
-                violation = max(deficit, excess)
-                if violation <= tolerance:
-                    break
-                if self.restart.numpy()[0] > 0.0:
-                    momentum_step = 1.0  # adaptive restart (O'Donoghue and Candes 2015)
-        # Back to the positions of the multipliers themselves, so a later solve can warm-start.
-        wp.launch(_settle, dim=count, inputs=[self.multiplier], outputs=[self.extrapolated, self.change], device=dev)
-        wp.launch(_primal_update, dim=count, inputs=[*constraint, self.normals, self.change, self.inverse_mass],
-                  outputs=[positions_t1], device=dev)
-        return ProjectionResult(iterations, violation, count)
+        self.solve_device(positions_t1, separation, tolerance)
+        return self.result()

@@ -276,19 +276,8 @@ class ImplicitEuler:
         if handle_targets is not None:
             self.set_handle_targets(handle_targets)
 
-        params = self._step_params(step)
-        self.system.assemble(state_in.positions, state_in.velocities, self.targets, params, contacts, self.dv,
-                             warm_start=self.config.cg_warm_start)
-        if self.config.preconditioner != "none":
-            self.system.diagonal(self._diagonal)
-            wp.launch(_invert_diagonal_blocks, dim=self.model.vertex_count, device=self.device,
-                      inputs=[self._diagonal, _PRECONDITIONER_MODE[self.config.preconditioner]],
-                      outputs=[self._inverse_diagonal])
-        iterations, residual, absolute_tolerance = self._solver()
-        wp.launch(_advance, dim=self.model.vertex_count, device=self.device,
-                  inputs=[self.model.vertices.kind, self.targets, self.system.reference_velocities,
-                          state_in.positions, state_in.velocities, self.dv, step],
-                  outputs=[state_out.positions, state_out.velocities])
+        self._launch_step(state_in, state_out, step, contacts)
+        iterations, residual, absolute_tolerance = self._solver.result()
         wp.synchronize_device(self.device)
 
         rhs_norm = float(absolute_tolerance) / self.config.cg_tolerance
@@ -298,6 +287,44 @@ class ImplicitEuler:
                                cg_converged=residual <= float(absolute_tolerance), rhs_norm=rhs_norm,
                                seconds=time.perf_counter() - started)
         return self.stats
+
+    def step_device(self, state_in: ClothState, state_out: ClothState, dt: float,
+                    contacts: ContactSprings | None = None, handle_targets: wp.array | None = None) -> None:
+        """:meth:`step` without reading anything back: the device path of a simulation step.
+
+        The arguments are as for :meth:`step`, except that ``handle_targets`` must be a
+        ``(handle_count,)`` vec3 ``wp.array`` on the integrator's device (or ``None``) and nothing is
+        validated but their types. The CG result stays on the device
+        (:meth:`pscc.sim.pcg.PreconditionedConjugateGradient.result` reads it). Pass the same
+        ``contacts`` every step (with a device count of 0 when there are none), so a recorded graph
+        holds the contact terms.
+
+        Allocates: only when the contact capacity grows. Capture-safe: yes (with the same arrays).
+        """
+        if handle_targets is not None:
+            self.set_handle_targets(handle_targets)
+        self._launch_step(state_in, state_out, float(dt), contacts)
+
+    def solve_result(self) -> tuple[int, float, float]:
+        """``(iterations, residual_norm, absolute_tolerance)`` of the last step's CG solve. A sync point."""
+        return self._solver.result()
+
+    def _launch_step(self, state_in: ClothState, state_out: ClothState, step: float,
+                     contacts: ContactSprings | None) -> None:
+        """Assemble, precondition, solve and advance: launches only."""
+        params = self._step_params(step)
+        self.system.assemble(state_in.positions, state_in.velocities, self.targets, params, contacts, self.dv,
+                             warm_start=self.config.cg_warm_start)
+        if self.config.preconditioner != "none":
+            self.system.diagonal(self._diagonal)
+            wp.launch(_invert_diagonal_blocks, dim=self.model.vertex_count, device=self.device,
+                      inputs=[self._diagonal, _PRECONDITIONER_MODE[self.config.preconditioner]],
+                      outputs=[self._inverse_diagonal])
+        self._solver.launch()
+        wp.launch(_advance, dim=self.model.vertex_count, device=self.device,
+                  inputs=[self.model.vertices.kind, self.targets, self.system.reference_velocities,
+                          state_in.positions, state_in.velocities, self.dv, step],
+                  outputs=[state_out.positions, state_out.velocities])
 
     def set_handle_targets(self, handle_targets: Any) -> None:
         """Set the positions [m] the handles reach at the end of the next step (and keep them after).

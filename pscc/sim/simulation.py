@@ -29,11 +29,14 @@ class Simulation:
         contact: contact settings (default :class:`ContactConfig`).
     """
 
-    def __init__(self, scene: Scene, device: str | None = None, contact: ContactConfig | None = None) -> None:
+    def __init__(self, scene: Scene, device: str | None = None, contact: ContactConfig | None = None, *,
+                 graph: bool = True) -> None:
         self.scene = scene
         self.solver = ClothSolver(scene, device=device, contact=contact)
         self.state = self.solver.initial_state()
         self._next = self.solver.initial_state()
+        self.graph = bool(graph)
+        """Record each frame into a graph after one eager frame and replay it (``False``: eager launches)."""
         self.frame = 0
         self.frame_stats: list[dict[str, Any]] = []
         self._last_checkpoint = 0
@@ -45,15 +48,15 @@ class Simulation:
         return self.solver.time
 
     def step_frame(self) -> dict[str, Any]:
-        """Advance one frame (``scene.steps_per_frame`` steps); return the frame's stats."""
+        """Advance one frame (``scene.steps_per_frame`` steps) on the device path; return the frame's stats.
+
+        See :meth:`ClothSolver.advance_frame`: one small read at the end of the frame, a recorded graph
+        replayed when :attr:`graph` is on, and the host path as the fallback for hard steps.
+        """
         started = time.perf_counter()
-        steps = []
-        for _ in range(self.scene.steps_per_frame):
-            stats = self.solver.step(self.state, self._next, self.scene.time_step)
-            self.state, self._next = self._next, self.state
-            steps.append(stats)
+        record = self.solver.advance_frame(self.state, self._next, self.scene.time_step, self.scene.steps_per_frame,
+                                           graph=self.graph)
         self.frame += 1
-        record = _sum_steps(steps)
         record.update(frame=self.frame, time=self.time, seconds_total=time.perf_counter() - started)
         self.frame_stats.append(record)
         return record
@@ -244,21 +247,6 @@ class Simulation:
             "frames": self.frame_stats,
             "device_bytes": solver.device_bytes(),
         }
-
-
-def _sum_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
-    """Stage seconds and counts of a frame: sums over its steps (maxima for the sizes)."""
-    seconds: dict[str, float] = {}
-    counts: dict[str, int] = {}
-    for stats in steps:
-        for key, value in stats["seconds"].items():
-            seconds[key] = seconds.get(key, 0.0) + float(value)
-        for key, value in stats["counts"].items():
-            if key in ("front_size", "contacts"):
-                counts[key] = max(counts.get(key, 0), int(value))
-            else:
-                counts[key] = counts.get(key, 0) + int(value)
-    return {"steps": len(steps), "seconds": seconds, "counts": counts}
 
 
 def _series_patterns(formats: tuple[str, ...]) -> list[str]:

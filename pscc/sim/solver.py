@@ -40,6 +40,14 @@ from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
 from pscc.sim.contact_config import ContactConfig
+from pscc.sim.device_step import (
+    CG_FAILED,
+    FLAG_NAMES,
+    FLAG_OVERFLOW,
+    DeviceStep,
+    _velocities_from_positions,
+    report_counts,
+)
 from pscc.sim.impact_response import ImpactZoneFailure, ImpactZones
 from pscc.sim.inelastic_projection import InelasticProjection
 from pscc.sim.integrator import ImplicitEuler
@@ -68,20 +76,6 @@ def _finite_in_range(positions: np.ndarray) -> bool:
 
 class _StepRejected(Exception):
     """Internal: this attempt failed; retry with half the step."""
-
-
-@wp.kernel
-def _velocities_from_positions(
-    # in:
-    positions_t0: wp.array(dtype=wp.vec3),
-    positions_t1: wp.array(dtype=wp.vec3),
-    inverse_dt: float,
-    # out:
-    velocities: wp.array(dtype=wp.vec3),
-):
-    """One thread per vertex: v = (x1 - x0) / dt."""
-    v = wp.tid()
-    velocities[v] = (positions_t1[v] - positions_t0[v]) * inverse_dt
 
 
 def _new_stats() -> dict[str, Any]:
@@ -185,13 +179,22 @@ class ClothSolver:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
         self.ccd_distance = self.contact.ccd_distance_ratio * self.thickness
         self.separation = self.contact.separation_ratio * self.thickness
+        self.response_tolerance = 0.5 * (self.separation - self.ccd_distance)
+        """KKT tolerance of the inelastic projection: half the band between the CCD distance and the separation."""
+        self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
         self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device)
         self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device)
+        # Room for contact before it happens (the device path flags an overflow and redoes the frame).
+        self.projection.reserve(self.cloth_face_count // 4)
+        self.proximity.springs.ensure(self.cloth_face_count // 4)
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
+        self._device_step: DeviceStep | None = None
+        self._frame_graph: tuple[tuple[Any, ...], Any] | None = None
+        self._frame_graph_warm: tuple[Any, ...] | None = None
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
@@ -299,6 +302,8 @@ class ClothSolver:
         self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()
                                        if key.startswith("detector_")})
         self.time = float(np.asarray(data["time"]).reshape(-1)[0])
+        self._frame_graph = None  # buffers may have been replaced: record again after an eager frame
+        self._frame_graph_warm = None
 
     def step(self, state_in: ClothState, state_out: ClothState, dt: float) -> dict[str, Any]:
         """Advance ``state_in`` by ``dt`` [s] into ``state_out``; the result is intersection-free.
@@ -321,6 +326,118 @@ class ClothSolver:
         stats["seconds"]["total"] = time.perf_counter() - started
         stats["counts"]["contacts"] = self.proximity.springs.host_count
         return stats
+
+    def advance_frame(self, state: ClothState, scratch: ClothState, dt: float, steps: int, *,
+                      graph: bool = True) -> dict[str, Any]:
+        """Advance ``state`` in place by ``steps`` steps of ``dt`` [s] on the device path; the result is
+        intersection-free.
+
+        Every step runs on the device (:class:`pscc.sim.device_step.DeviceStep`); the frame reads one
+        small report back at its end. With ``graph``, the frame is recorded into a graph after one
+        eager frame of the same shape and replayed from then on (bit-identical to eager on the CPU).
+        When the report shows that a step would need a smaller step, rigid impact zones, or a bigger
+        buffer, the frame is restored and run again on the host path (:meth:`step`), which halves
+        and grows as needed; ``counts.device_fallbacks`` counts those frames.
+
+        Args:
+            state: the state at the frame's start; holds the frame's end afterwards.
+            scratch: a second state of the same solver (overwritten).
+            dt: time step [s].
+            steps: steps in the frame (>= 1).
+            graph: record and replay the frame as a graph (``False``: eager launches only).
+
+        Returns:
+            Frame stats: ``steps``, ``seconds`` (``total``; per stage only for frames that fell back)
+            and ``counts`` as :meth:`step` sums them, plus ``device_fallbacks`` and ``graph_replays``;
+            a frame that fell back also has ``fallback_reason``.
+
+        Raises:
+            SimulationError: the host path could not make a step intersection-free.
+
+        Allocates: on the first frame, when a buffer grows, and on recording. Capture-safe: no.
+        """
+        started = time.perf_counter()
+        runner = self._device_runner()
+        t0 = self.time
+        times = [t0]
+        for _ in range(steps):
+            times.append(times[-1] + float(dt))
+        if self.model.handle_count:
+            runner.upload_targets(np.stack([self._kinematic_targets(t) for t in times[1:]]))
+        runner.save(state)
+        replayed = self._run_device_frame(runner, state, scratch, float(dt), steps, graph)
+        report = runner.read_report()
+        failed = [name for flag, name in FLAG_NAMES.items() if report[flag]]
+        if report[FLAG_OVERFLOW]:  # the other flags of the frame are then its consequences
+            failed = [f"{FLAG_NAMES[FLAG_OVERFLOW]} ({runner.overflow_name(int(report[FLAG_OVERFLOW]))})"]
+        if report[CG_FAILED] and not failed:
+            failed = ["the linear solve overflowed"]
+        if not failed:
+            if runner.grow_near_full(report):
+                self._frame_graph = None  # record again, after an eager frame on the new buffers
+                self._frame_graph_warm = None
+            self.time = times[-1]
+            counts = _new_stats()["counts"]
+            counts.update(report_counts(report), device_fallbacks=0, graph_replays=int(replayed))
+            return {"steps": steps, "seconds": {"total": time.perf_counter() - started}, "counts": counts}
+        # Rare: restore the frame's start and run it on the host path (halvings, impact zones, growth).
+        runner.restore()
+        self._frame_graph = None  # the host path may grow buffers: record again after an eager frame
+        self._frame_graph_warm = None
+        current, other = state, scratch
+        seconds: dict[str, float] = {}
+        counts = {}
+        for _ in range(steps):
+            stats = self.step(current, other, dt)
+            current, other = other, current
+            for key, value in stats["seconds"].items():
+                seconds[key] = seconds.get(key, 0.0) + float(value)
+            for key, value in stats["counts"].items():
+                counts[key] = max(counts.get(key, 0), int(value)) if key in ("front_size", "contacts") \
+                    else counts.get(key, 0) + int(value)
+        if current is not state:
+            wp.copy(state.positions, current.positions)
+            wp.copy(state.velocities, current.velocities)
+        self.time = times[-1]
+        counts.update(device_fallbacks=1, graph_replays=0)
+        seconds["total"] = time.perf_counter() - started
+        return {"steps": steps, "seconds": seconds, "counts": counts, "fallback_reason": "; ".join(failed)}
+
+    def _device_runner(self) -> DeviceStep:
+        if self._device_step is None:
+            self._device_step = DeviceStep(self)
+        return self._device_step
+
+    def _run_device_frame(self, runner: DeviceStep, state: ClothState, scratch: ClothState, dt: float, steps: int,
+                          graph: bool) -> bool:
+        """Run the frame's steps on the device: replay the recorded graph when it fits, else launch
+        eagerly (and record a graph once an eager frame of this shape has succeeded). Returns whether
+        the graph was replayed."""
+        key = (state.positions.ptr, scratch.positions.ptr, dt, steps)
+        if graph and self._frame_graph is not None and self._frame_graph[0] == key:
+            wp.capture_launch(self._frame_graph[1])
+            return True
+        if graph and self._frame_graph_warm == key:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._launch_frame(runner, state, scratch, dt, steps)
+            self._frame_graph = (key, capture.graph)
+            wp.capture_launch(capture.graph)
+            return True
+        self._launch_frame(runner, state, scratch, dt, steps)
+        self._frame_graph_warm = key
+        return False
+
+    def _launch_frame(self, runner: DeviceStep, state: ClothState, scratch: ClothState, dt: float,
+                      steps: int) -> None:
+        """The launches of one frame (recorded as they are into a graph)."""
+        runner.clear_report()
+        current, other = state, scratch
+        for index in range(steps):
+            runner.step(current, other, dt, index)
+            current, other = other, current
+        if current is not state:
+            wp.copy(state.positions, current.positions)
+            wp.copy(state.velocities, current.velocities)
 
     # ------------------------------------------------------------------ internals
 
@@ -402,7 +519,7 @@ class ClothSolver:
         positions_t1 = wp.array(x1, dtype=wp.vec3, device=self.device)
         rounds = 0
         self.projection.reset()
-        tolerance = 0.5 * (self.separation - self.ccd_distance)
+        tolerance = self.response_tolerance
         while True:
             mark = time.perf_counter()
             # After a response, only pairs with a vertex it moved are tested again (exact re-check).

@@ -1,0 +1,146 @@
+"""The device path of the solver: a frame with no host round trip, recorded into a graph and replayed.
+
+Checked here: replayed frames equal eager frames bit for bit on the CPU (and are intersection-free on
+every device), a steady-state frame reads one small report back and nothing else, the host path
+takes over a frame whose steps need it (restored from the frame's start), and an overflowing buffer
+is grown instead of losing pairs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import ipctk
+import numpy as np
+import pytest
+import warp as wp
+
+from pscc.scenes import build_scene
+from pscc.sim.contact_config import ContactConfig
+from pscc.sim.simulation import Simulation
+
+
+def _intersection_free(sim: Simulation) -> bool:
+    solver = sim.solver
+    x = sim.state.positions.numpy().astype(np.float64)
+    faces = solver.collision_faces
+    mesh = ipctk.CollisionMesh(np.zeros_like(x), ipctk.edges(faces), faces)
+    return not ipctk.has_intersections(mesh, x)
+
+
+@contextlib.contextmanager
+def _count_host_traffic() -> Iterator[dict[str, int]]:
+    """Count host reads, syncs and uploads (as ``../shared/tools/host_traffic.py`` does) in the block."""
+    counts = {"reads": 0, "syncs": 0, "uploads": 0}
+    patches = []
+
+    def wrap(owner: object, name: str, kind: str) -> None:
+        original = getattr(owner, name)
+
+        def counted(*args: object, **kwargs: object) -> object:
+            counts[kind] += 1
+            return original(*args, **kwargs)
+
+        patches.append((owner, name, original))
+        setattr(owner, name, counted)
+
+    wrap(wp.array, "numpy", "reads")
+    wrap(wp.array, "list", "reads")
+    wrap(wp, "synchronize", "syncs")
+    wrap(wp, "synchronize_device", "syncs")
+    wrap(wp.array, "assign", "uploads")
+    wrap(wp, "from_numpy", "uploads")
+    original_init = wp.array.__init__
+
+    def init(self: wp.array, data: object = None, *args: object, **kwargs: object) -> None:
+        if data is not None and not isinstance(data, wp.array | int | float):
+            counts["uploads"] += 1
+        original_init(self, data, *args, **kwargs)
+
+    wp.array.__init__ = init
+    try:
+        yield counts
+    finally:
+        wp.array.__init__ = original_init
+        for owner, name, original in patches:
+            setattr(owner, name, original)
+
+
+def _frames(name: str, triangles: int, frames: int, graph: bool, device: str = "cpu",
+            contact: ContactConfig | None = None) -> tuple[Simulation, list[np.ndarray]]:
+    sim = Simulation(build_scene(name, triangles), device=device, contact=contact, graph=graph)
+    positions = []
+    for _ in range(frames):
+        sim.step_frame()
+        positions.append(sim.state.positions.numpy().copy())
+    return sim, positions
+
+
+@pytest.mark.parametrize("name", ["drape", "stack", "twist"])
+def test_replayed_frames_equal_eager_frames_bit_for_bit(name: str) -> None:
+    graph_sim, replayed = _frames(name, 300, 8, graph=True)
+    eager_sim, eager = _frames(name, 300, 8, graph=False)
+    assert sum(f["counts"]["graph_replays"] for f in graph_sim.frame_stats) >= 2
+    assert sum(f["counts"]["graph_replays"] for f in eager_sim.frame_stats) == 0
+    for frame, (a, b) in enumerate(zip(replayed, eager, strict=True)):
+        np.testing.assert_array_equal(a, b, err_msg=f"{name}: frame {frame + 1}")
+    assert _intersection_free(graph_sim)
+    contact_frames = [f for f in graph_sim.frame_stats if f["counts"]["ccd_rounds"] > 0]
+    assert contact_frames, "every frame runs at least one CCD per step"
+
+
+def test_device_frames_are_intersection_free_on_every_device(device: str) -> None:
+    sim = Simulation(build_scene("stack", 300), device=device)
+    for _ in range(4):
+        record = sim.step_frame()
+        assert _intersection_free(sim), f"frame {sim.frame} on {device}"
+        assert record["counts"]["dcd_vertex_face"] + record["counts"]["dcd_edge_edge"] >= 0
+    assert sim.frame_stats[-1]["counts"]["contacts"] > 0  # the layers touch: springs were made on the device
+
+
+@pytest.mark.parametrize("name", ["drape", "stack"])
+def test_a_steady_state_frame_reads_one_report_and_uploads_nothing_but_targets(name: str) -> None:
+    sim = Simulation(build_scene(name, 300), device="cpu")
+    for _ in range(7):  # warm-up: the buffers grow while the contact builds up (frames that fall back)
+        sim.step_frame()
+    with _count_host_traffic() as counts:
+        record = sim.step_frame()
+    assert record["counts"]["device_fallbacks"] == 0
+    assert record["counts"]["graph_replays"] == 1
+    assert counts["reads"] == 1 and counts["syncs"] == 0, counts
+    has_targets = sim.solver.model.handle_count > 0
+    assert counts["uploads"] == int(has_targets), counts
+
+
+def test_a_frame_the_device_path_cannot_finish_runs_again_on_the_host_path() -> None:
+    # Zero projection rounds: the first CCD hit flags the frame, which the host path redoes with
+    # impact zones from the restored start.
+    contact = ContactConfig(projection_rounds=0)
+    sim = Simulation(build_scene("drape", 300), device="cpu", contact=contact)
+    reasons = []
+    for _ in range(8):  # the first frames also grow buffers (overflow fallbacks)
+        record = sim.step_frame()
+        if record["counts"]["device_fallbacks"]:
+            reasons.append(record["fallback_reason"])
+            if "projection rounds" in record["fallback_reason"]:
+                assert record["counts"]["zone_rounds"] > 0  # the host path used the impact zones
+        assert _intersection_free(sim)
+    assert any("projection rounds" in reason for reason in reasons), reasons
+
+
+def test_an_overflowing_candidate_buffer_is_grown_not_truncated() -> None:
+    sim = Simulation(build_scene("stack", 300), device="cpu")
+    sim.step_frame()
+    candidates = sim.solver.detector.candidates
+    # Shrink the buffers below what a step needs: the device path must flag it, not drop pairs.
+    candidates.vertex_face = wp.empty(4, dtype=wp.vec2i, device="cpu")
+    candidates.edge_edge = wp.empty(4, dtype=wp.vec2i, device="cpu")
+    sim.solver._frame_graph = None
+    record = sim.step_frame()
+    assert record["counts"]["device_fallbacks"] == 1
+    assert "candidates" in record["fallback_reason"]
+    assert candidates.capacity_vf > 4 and candidates.capacity_ee > 4
+    assert _intersection_free(sim)
+    later = [sim.step_frame()["counts"]["device_fallbacks"] for _ in range(5)]
+    assert later[-1] == 0, later  # grown: the device path runs the frames again
