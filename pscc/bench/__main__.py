@@ -14,6 +14,8 @@ Sections:
    ``twist`` (:mod:`pscc.bench.simulator`).
 7. The paper's scenes: seconds per frame, stages and memory per scene on this machine's device (the
    paper's Figure 10; :mod:`pscc.bench.scenes`).
+8. The device path: host reads, syncs and uploads per frame, graph replay against eager launches and
+   memory per triangle (:mod:`pscc.bench.device_path`).
 
 Timings are the median of repeats after a warm-up run that compiles and loads the kernels.
 """
@@ -32,7 +34,7 @@ import numpy as np
 import warp as wp
 from tqdm import tqdm
 
-from pscc.bench import broad_phase, simulator
+from pscc.bench import broad_phase, device_path, simulator
 from pscc.bench import scenes as paper_scenes
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
@@ -167,6 +169,8 @@ def write_report(results: dict[str, Any], out: Path) -> None:
             path.parent.mkdir(parents=True, exist_ok=True)
             drawn = plot(results[key], path)
             lines += report(results[key], path.relative_to(out.parent).as_posix() if drawn else None)
+    if results.get("device_path"):
+        lines += device_path.report(results["device_path"])
     out.write_text("\n".join(lines))
 
 
@@ -257,6 +261,10 @@ def main(argv: list[str] | None = None) -> int:
                         "triangles and 4 frames at 20K, about 4 min on 2 CPU cores), quick (2 frames each) or skip")
     parser.add_argument("--scene-names", nargs="+", default=None, metavar="SCENE", choices=sorted(PAPER_SCENES),
                         help="only these paper scenes in the scenes section")
+    parser.add_argument("--device-path", choices=("full", "quick", "skip"), default="full",
+                        help="host traffic, graph against eager and memory of the device path: full (drape, stack, "
+                        "twist at 2K and 5K and the paper's twisting, about 6 min on 2 CPU cores), quick (2K drape "
+                        "and stack) or skip")
     parser.add_argument("--only-simulator", action="store_true",
                         help="run only the simulator sections (5 and 6); the report then holds only them")
     args = parser.parse_args(argv)
@@ -295,6 +303,10 @@ def main(argv: list[str] | None = None) -> int:
         with tqdm(desc="paper scenes", unit="frame", leave=False) as bar:
             results["paper_scenes"] = paper_scenes.run_scenes(device.alias, quick=args.scenes == "quick",
                                                               names=args.scene_names, progress=_progress(bar))
+    if args.device_path != "skip":
+        cases = device_path.QUICK_CASES if args.device_path == "quick" else device_path.CASES
+        with tqdm(desc="device path", unit="frame", leave=False) as bar:
+            results["device_path"] = device_path.run(cases, device.alias, _progress(bar))
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(results, indent=2))
     write_report(results, out)

@@ -65,10 +65,11 @@ NEAR_FULL_BROAD_PHASE = 19
 NEAR_FULL_INTERSECTION = 20
 REPORT_SIZE = 21
 
-NEAR_FULL_FRACTION = 0.75
+NEAR_FULL_FRACTION = 0.85
 """A growing buffer (contact springs, candidates, projection constraints, hash tables) that a frame
 fills beyond this fraction is grown (twice its size) after the frame, before it overflows: contact
-builds up over frames, and an overflow costs a frame on the host path."""
+builds up over frames, and an overflow costs a frame on the host path. Above 1 / 1.25 = 0.8, so a
+buffer the host path just sized (1.25 x its need) is not doubled at once."""
 
 FLAG_NAMES: dict[int, str] = {
     FLAG_RANGE: "positions became NaN, Inf or left the coordinate range",

@@ -30,13 +30,16 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, device: str | None = None, contact: ContactConfig | None = None, *,
-                 graph: bool = True) -> None:
+                 graph: bool = True, stage_timing: bool = False) -> None:
         self.scene = scene
         self.solver = ClothSolver(scene, device=device, contact=contact)
         self.state = self.solver.initial_state()
         self._next = self.solver.initial_state()
         self.graph = bool(graph)
         """Record each frame into a graph after one eager frame and replay it (``False``: eager launches)."""
+        self.stage_timing = bool(stage_timing)
+        """Run every step on the host path (:meth:`ClothSolver.step`), which synchronizes after each stage
+        and reports seconds per stage: a profiling mode, slower on a GPU (a host round trip per stage)."""
         self.frame = 0
         self.frame_stats: list[dict[str, Any]] = []
         self._last_checkpoint = 0
@@ -51,11 +54,16 @@ class Simulation:
         """Advance one frame (``scene.steps_per_frame`` steps) on the device path; return the frame's stats.
 
         See :meth:`ClothSolver.advance_frame`: one small read at the end of the frame, a recorded graph
-        replayed when :attr:`graph` is on, and the host path as the fallback for hard steps.
+        replayed when :attr:`graph` is on, and the host path as the fallback for hard steps. With
+        :attr:`stage_timing`, the frame runs on the host path and its stats hold seconds per stage.
         """
         started = time.perf_counter()
-        record = self.solver.advance_frame(self.state, self._next, self.scene.time_step, self.scene.steps_per_frame,
-                                           graph=self.graph)
+        if self.stage_timing:
+            record = self.solver.advance_frame_host(self.state, self._next, self.scene.time_step,
+                                                    self.scene.steps_per_frame)
+        else:
+            record = self.solver.advance_frame(self.state, self._next, self.scene.time_step,
+                                               self.scene.steps_per_frame, graph=self.graph)
         self.frame += 1
         record.update(frame=self.frame, time=self.time, seconds_total=time.perf_counter() - started)
         self.frame_stats.append(record)

@@ -384,9 +384,30 @@ class ClothSolver:
         runner.restore()
         self._frame_graph = None  # the host path may grow buffers: record again after an eager frame
         self._frame_graph_warm = None
+        self.time = t0
+        record = self.advance_frame_host(state, scratch, dt, steps)
+        record["counts"]["device_fallbacks"] = 1
+        record["fallback_reason"] = "; ".join(failed)
+        record["seconds"]["total"] = time.perf_counter() - started
+        return record
+
+    def advance_frame_host(self, state: ClothState, scratch: ClothState, dt: float, steps: int) -> dict[str, Any]:
+        """Advance ``state`` in place by ``steps`` host-path steps (:meth:`step`) of ``dt`` [s].
+
+        The host path reads results back after every stage, so its stats hold seconds per stage
+        (``seconds``: sums over the steps, and ``total``; ``counts``: sums, maxima for the sizes). It is
+        the fallback of :meth:`advance_frame` and the profiling mode of
+        :class:`pscc.sim.simulation.Simulation` (``stage_timing=True``).
+
+        Raises:
+            SimulationError: a step could not be made intersection-free.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        started = time.perf_counter()
         current, other = state, scratch
         seconds: dict[str, float] = {}
-        counts = {}
+        counts: dict[str, int] = {}
         for _ in range(steps):
             stats = self.step(current, other, dt)
             current, other = other, current
@@ -398,10 +419,9 @@ class ClothSolver:
         if current is not state:
             wp.copy(state.positions, current.positions)
             wp.copy(state.velocities, current.velocities)
-        self.time = times[-1]
-        counts.update(device_fallbacks=1, graph_replays=0)
+        counts.update(device_fallbacks=0, graph_replays=0)
         seconds["total"] = time.perf_counter() - started
-        return {"steps": steps, "seconds": seconds, "counts": counts, "fallback_reason": "; ".join(failed)}
+        return {"steps": steps, "seconds": seconds, "counts": counts}
 
     def _device_runner(self) -> DeviceStep:
         if self._device_step is None:

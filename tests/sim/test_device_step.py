@@ -8,14 +8,12 @@ is grown instead of losing pairs.
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
-
 import ipctk
 import numpy as np
 import pytest
 import warp as wp
 
+from pscc.bench.host_traffic import count_host_traffic
 from pscc.scenes import build_scene
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.simulation import Simulation
@@ -27,44 +25,6 @@ def _intersection_free(sim: Simulation) -> bool:
     faces = solver.collision_faces
     mesh = ipctk.CollisionMesh(np.zeros_like(x), ipctk.edges(faces), faces)
     return not ipctk.has_intersections(mesh, x)
-
-
-@contextlib.contextmanager
-def _count_host_traffic() -> Iterator[dict[str, int]]:
-    """Count host reads, syncs and uploads (as ``../shared/tools/host_traffic.py`` does) in the block."""
-    counts = {"reads": 0, "syncs": 0, "uploads": 0}
-    patches = []
-
-    def wrap(owner: object, name: str, kind: str) -> None:
-        original = getattr(owner, name)
-
-        def counted(*args: object, **kwargs: object) -> object:
-            counts[kind] += 1
-            return original(*args, **kwargs)
-
-        patches.append((owner, name, original))
-        setattr(owner, name, counted)
-
-    wrap(wp.array, "numpy", "reads")
-    wrap(wp.array, "list", "reads")
-    wrap(wp, "synchronize", "syncs")
-    wrap(wp, "synchronize_device", "syncs")
-    wrap(wp.array, "assign", "uploads")
-    wrap(wp, "from_numpy", "uploads")
-    original_init = wp.array.__init__
-
-    def init(self: wp.array, data: object = None, *args: object, **kwargs: object) -> None:
-        if data is not None and not isinstance(data, wp.array | int | float):
-            counts["uploads"] += 1
-        original_init(self, data, *args, **kwargs)
-
-    wp.array.__init__ = init
-    try:
-        yield counts
-    finally:
-        wp.array.__init__ = original_init
-        for owner, name, original in patches:
-            setattr(owner, name, original)
 
 
 def _frames(name: str, triangles: int, frames: int, graph: bool, device: str = "cpu",
@@ -104,7 +64,7 @@ def test_a_steady_state_frame_reads_one_report_and_uploads_nothing_but_targets(n
     sim = Simulation(build_scene(name, 300), device="cpu")
     for _ in range(7):  # warm-up: the buffers grow while the contact builds up (frames that fall back)
         sim.step_frame()
-    with _count_host_traffic() as counts:
+    with count_host_traffic() as counts:
         record = sim.step_frame()
     assert record["counts"]["device_fallbacks"] == 0
     assert record["counts"]["graph_replays"] == 1
