@@ -256,8 +256,14 @@ class CollisionDetector:
         if self.front is not None and front_state:
             self.front.load_state_dict(front_state)
 
-    def broad_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> dict[str, Any]:
+    def broad_phase(self, positions: Any, positions_end: Any = None,
+                    thickness: float = 0.0) -> dict[str, Any] | None:
         """Find candidate feature pairs from boxes over [positions, positions_end] grown by ``thickness``.
+
+        Positions may be host arrays (copied to the device) or ``wp.array`` s of ``wp.vec3`` on the
+        detector's device (used in place: :meth:`broad_phase_device`, then, outside a graph capture,
+        :meth:`check_capacity`, re-running until every buffer fits; nothing else is read back and
+        ``None`` is returned instead of the stats, see :meth:`broad_phase_stats`).
 
         The candidates stay in the detector, so one broad phase can serve several narrow phases
         (the paper's Figure 8b): the CCD of a step (:meth:`narrow_phase` with both positions and
@@ -277,8 +283,23 @@ class CollisionDetector:
             InputError: bad positions or thickness, including coordinates or a thickness outside
                 the supported range (see the class docstring).
         """
+        if isinstance(positions, wp.array):
+            self._prepare_from(positions)
+            while True:
+                self.broad_phase_device(positions, positions_end, thickness)
+                if self.device.is_capturing or self.check_capacity():
+                    break
+            return None
         x0, x1, h = self._inputs(positions, positions_end, thickness)
         return self._broad(x0, x1, h)
+
+    def _prepare_from(self, positions: wp.array) -> None:
+        """Build the structures from the first device positions (one host copy, outside any capture)."""
+        if self.topology is None:
+            if self.device.is_capturing:
+                raise InputError("argument", "detector", "is not prepared and a graph is being recorded",
+                                 "call prepare(positions) or run one call before recording")
+            self.prepare(positions.numpy())
 
     def _broad(self, x0: np.ndarray, x1: np.ndarray | None, h: float) -> dict[str, Any]:
         """Broad phase on validated float32 host positions: upload, the device path, then the
@@ -476,6 +497,12 @@ class CollisionDetector:
         x0 = self._device_positions(positions_t0, "positions_t0")
         x1 = None if positions_t1 is None else self._device_positions(positions_t1, "positions_t1")
         h = check_thickness(thickness, "thickness")
+        if x1 is not None and self._broad_mode == "dcd":
+            raise InputError("argument", "positions_t1", "the last broad phase was discrete (no end positions)",
+                             "run a broad phase with end positions before a CCD narrow phase")
+        if h > self._broad_thickness:
+            raise InputError("argument", "thickness", f"{h:g} exceeds the broad phase's thickness "
+                             f"{self._broad_thickness:g}", "run the broad phase with at least this thickness")
         moved = None
         if x1 is not None and recheck:
             moved = self.narrow.mark_moved(self._previous_t0, x0, self._previous_t1, x1)
@@ -489,8 +516,11 @@ class CollisionDetector:
         return self.narrow.contacts(self.candidates, continuous=x1 is not None, thickness=h)
 
     def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0,
-                     recheck: bool = False) -> CollisionResult:
+                     recheck: bool = False) -> CollisionResult | DeviceContacts:
         """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
+
+        With ``wp.array`` positions on the detector's device, this is :meth:`narrow_phase_device`: the
+        result stays on the device (:class:`DeviceContacts`; :meth:`collect` copies it to the host).
 
         The caller is responsible for the candidates covering these positions: boxes of the
         broad phase must contain the motion tested here (the Figure 8b pipeline guarantees it: CCD
@@ -508,6 +538,8 @@ class CollisionDetector:
                 larger than the broad phase's (its candidates would not cover the query), or
                 positions or a thickness outside the supported range (see the class docstring).
         """
+        if isinstance(positions, wp.array):
+            return self.narrow_phase_device(positions, positions_end, thickness, recheck=recheck)
         if self._broad_mode is None:
             raise InputError("argument", "narrow_phase", "no broad phase has run", "call broad_phase() first")
         x0, x1, h = self._inputs(positions, positions_end, thickness)
@@ -541,8 +573,18 @@ class CollisionDetector:
         result.stats = {"narrow_phase": narrow_seconds, "output": time.perf_counter() - mark}
         return result
 
-    def detect(self, positions: Any, positions_end: Any = None, thickness: float = 0.0) -> CollisionResult:
+    def detect(self, positions: Any, positions_end: Any = None,
+               thickness: float = 0.0) -> CollisionResult | DeviceContacts:
         """Find the colliding vertex-face and edge-edge pairs of one step.
+
+        Host arrays in, a :class:`CollisionResult` out. ``wp.array`` positions (``wp.vec3`` on the
+        detector's device) are used in place and the result stays on the device: a
+        :class:`DeviceContacts` whose rows are the candidates with a time of impact <= 1 (unsorted;
+        :meth:`collect` gives the sorted host rows). Outside a graph capture the call then reads the
+        buffer counters once (:meth:`check_capacity`) and runs again if a buffer had to grow, so no pair
+        is dropped; inside a capture nothing is read, and an overflow is left in the counters for the
+        caller's :meth:`check_capacity` after the replay. The first such call builds the structures
+        from a host copy of the positions (or call :meth:`prepare` first).
 
         Args:
             positions: (vertex_count, 3) positions at the start of the step.
@@ -560,6 +602,13 @@ class CollisionDetector:
             InputError: bad positions or thickness, including coordinates or a thickness outside
                 the supported range (see the class docstring).
         """
+        if isinstance(positions, wp.array):
+            self._prepare_from(positions)
+            while True:
+                self.broad_phase_device(positions, positions_end, thickness)
+                contacts = self.narrow_phase_device(positions, positions_end, thickness)
+                if self.device.is_capturing or self.check_capacity():
+                    return contacts
         started = time.perf_counter()
         x0, x1, h = self._inputs(positions, positions_end, thickness)
         setup = time.perf_counter() - started
@@ -601,10 +650,19 @@ class CollisionDetector:
         sizes["total"] = sum(sizes.values())
         return sizes
 
+    def collect(self, contacts: DeviceContacts) -> CollisionResult:
+        """Copy a device result (:meth:`detect` / :meth:`narrow_phase` on ``wp.array`` s) to the host as
+        a :class:`CollisionResult` (hits only, rows sorted). Valid until the next call of this detector.
+
+        A sync point (reads the counters and the rows). Allocates: yes (host arrays). Capture-safe: no.
+        """
+        return self._collect(ccd=contacts.continuous)
+
     def _collect(self, *, ccd: bool) -> CollisionResult:
         """Copy the reported pairs to the host as sorted rows (a sync point)."""
-        vf_count = self.candidates.vertex_face_count
-        ee_count = self.candidates.edge_edge_count
+        counts = self.candidates.counts.numpy()
+        vf_count = max(0, min(int(counts[0]), self.candidates.capacity_vf))
+        ee_count = max(0, min(int(counts[1]), self.candidates.capacity_ee))
         vf_pairs = self.candidates.vertex_face[:vf_count].numpy().reshape(-1, 2)
         ee_pairs = self.candidates.edge_edge[:ee_count].numpy().reshape(-1, 2)
         vf_toi = self.narrow.vertex_face_toi[:vf_count].numpy()
