@@ -193,6 +193,10 @@ class IntersectionCheck:
         object_ids: (face_count,) integer object id per face, or ``None`` (all 0).
         cell_size_factor: spatial hash cell size over the mean face box size.
         hit_capacity: initial hit slots (default 64); grown to the exact need.
+        spatial_hash: a :class:`SpatialHash` over the same faces to use (and grow) instead of a new one,
+            e.g. a :class:`pscc.collision.detector.CollisionDetector`'s: its buffers are scratch between
+            calls, so a simulator that checks after its broad phase's pairs were consumed saves a
+            second set of hash tables. Its own pair sort and slab test are not used (no node ids).
 
     Raises:
         InputError: invalid faces, vertex count, object ids or options.
@@ -209,6 +213,7 @@ class IntersectionCheck:
         object_ids: np.ndarray | None = None,
         cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
         hit_capacity: int = 64,
+        spatial_hash: SpatialHash | None = None,
     ) -> None:
         if isinstance(vertex_count, bool) or not isinstance(vertex_count, int | np.integer) or vertex_count < 0:
             raise InputError("argument", "vertex_count", f"{vertex_count!r} is not an integer >= 0",
@@ -250,7 +255,12 @@ class IntersectionCheck:
         self._allocate_hits(int(hit_capacity))
         self._hit_total = 0
         self._hit_reruns = 0
-        self.spatial_hash = SpatialHash(m, dev, cell_size_factor, sort_pairs=False)
+        if spatial_hash is not None and (not isinstance(spatial_hash, SpatialHash) or spatial_hash.face_count != m
+                                         or spatial_hash.device != dev or spatial_hash.skip_adjacent):
+            raise InputError("argument", "spatial_hash", "is not a SpatialHash over these faces on this device "
+                             "(without skip_adjacent)", "pass the detector's hash over the same faces, or None")
+        self.spatial_hash = spatial_hash if spatial_hash is not None else SpatialHash(m, dev, cell_size_factor,
+                                                                                      sort_pairs=False)
         self.stats = IntersectionStats()
         self._kinds = np.zeros(0, dtype=np.int32)
         self._bounds = np.zeros(0, dtype=np.float32)

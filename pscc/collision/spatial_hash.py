@@ -544,21 +544,21 @@ class SpatialHash:
                 (info, kernels.INFO_WANTED_CELLS, 0), (info, kernels.INFO_BAD_BOXES, 0),
                 (info, kernels.INFO_BAD_NODES, 0), (info, kernels.INFO_BAD_ORDER, 0)]
 
-    def grow(self, counters: set[int]) -> None:
-        """Double the buffers behind the given :meth:`overflow_counters` indices (0 entries, 1 groups,
-        2 rows, 3 pairs) ahead of an overflow (a caller that saw them nearly full). A recorded call
-        then holds stale buffers and must be recorded again.
+    def grow(self, counters: set[int], factor: float = 1.5) -> None:
+        """Grow the buffers behind the given :meth:`overflow_counters` indices (0 entries, 1 groups,
+        2 rows, 3 pairs) by ``factor`` ahead of an overflow (a caller that saw them nearly full). A
+        recorded call then holds stale buffers and must be recorded again.
 
         Allocates: yes. Capture-safe: no.
         """
         if 0 in counters:
-            self._allocate_entries(min(MAX_ENTRIES, 2 * self.entry_capacity))
+            self._allocate_entries(min(MAX_ENTRIES, int(factor * self.entry_capacity) + 1))
         if 1 in counters:
-            self._allocate_groups(min(MAX_ENTRIES, 2 * self.group_capacity))
+            self._allocate_groups(min(MAX_ENTRIES, int(factor * self.group_capacity) + 1))
         if 2 in counters:
-            self._allocate_rows(min(MAX_ENTRIES, 2 * self.row_capacity))
+            self._allocate_rows(min(MAX_ENTRIES, int(factor * self.row_capacity) + 1))
         if 3 in counters:
-            self._allocate_pairs(min(MAX_PAIRS, 2 * self.pair_capacity))
+            self._allocate_pairs(min(MAX_PAIRS, int(factor * self.pair_capacity) + 1))
 
     def check_capacity(self) -> bool:
         """Sync point: read the counters of the last device call (one copy), raise its deferred input

@@ -65,11 +65,14 @@ NEAR_FULL_BROAD_PHASE = 19
 NEAR_FULL_INTERSECTION = 20
 REPORT_SIZE = 21
 
+NEAR_FULL_GROWTH = 1.5
+"""Factor a nearly full buffer grows by (see :data:`NEAR_FULL_FRACTION`)."""
+
 NEAR_FULL_FRACTION = 0.85
 """A growing buffer (contact springs, candidates, projection constraints, hash tables) that a frame
-fills beyond this fraction is grown (twice its size) after the frame, before it overflows: contact
-builds up over frames, and an overflow costs a frame on the host path. Above 1 / 1.25 = 0.8, so a
-buffer the host path just sized (1.25 x its need) is not doubled at once."""
+fills beyond this fraction is grown after the frame (to about :data:`NEAR_FULL_GROWTH` x its size),
+before it overflows: contact builds up over frames, and an overflow costs a frame on the host path.
+Above 1 / 1.25 = 0.8, so a buffer the host path just sized (1.25 x its need) is not grown at once."""
 
 FLAG_NAMES: dict[int, str] = {
     FLAG_RANGE: "positions became NaN, Inf or left the coordinate range",
@@ -463,7 +466,7 @@ class DeviceStep:
                   outputs=[self.report], device=self.device)
 
     def grow_near_full(self, report: np.ndarray) -> bool:
-        """After a frame that fit: grow (x2) the buffers its report marks as nearly full.
+        """After a frame that fit: grow the buffers its report marks as nearly full.
 
         Returns whether anything grew (recorded graphs then hold stale buffers).
         Allocates: when growing. Capture-safe: no.
@@ -472,21 +475,25 @@ class DeviceStep:
         grew = False
         if report[NEAR_FULL_SPRINGS]:
             springs = solver.proximity.springs
-            springs.ensure(2 * springs.capacity)
+            springs.ensure(int(NEAR_FULL_GROWTH * springs.capacity))
             solver.integrator.system.reserve_contacts(springs.capacity)
             grew = True
+        hashes: dict[int, tuple[Any, set[int]]] = {}  # the check may share the detector's hash: grow it once
         for slot, spatial_hash in ((NEAR_FULL_BROAD_PHASE, getattr(solver.detector, "spatial_hash", None)),
                                    (NEAR_FULL_INTERSECTION, solver.intersection_check.spatial_hash)):
             if report[slot] and spatial_hash is not None:
-                spatial_hash.grow({bit for bit in range(4) if int(report[slot]) >> bit & 1})
-                grew = True
+                bits = hashes.setdefault(id(spatial_hash), (spatial_hash, set()))[1]
+                bits.update(bit for bit in range(4) if int(report[slot]) >> bit & 1)
+        for spatial_hash, bits in hashes.values():
+            spatial_hash.grow(bits, NEAR_FULL_GROWTH)
+            grew = True
         if report[NEAR_FULL_PROJECTION]:
-            solver.projection.reserve(2 * solver.projection.capacity)
+            solver.projection.reserve(int(NEAR_FULL_GROWTH * solver.projection.capacity))
             grew = True
         if report[NEAR_FULL_VERTEX_FACE] or report[NEAR_FULL_EDGE_EDGE]:
             candidates = solver.detector.candidates
-            candidates.ensure(2 * candidates.capacity_vf if report[NEAR_FULL_VERTEX_FACE] else 0,
-                              2 * candidates.capacity_ee if report[NEAR_FULL_EDGE_EDGE] else 0)
+            candidates.ensure(int(NEAR_FULL_GROWTH * candidates.capacity_vf) if report[NEAR_FULL_VERTEX_FACE] else 0,
+                              int(NEAR_FULL_GROWTH * candidates.capacity_ee) if report[NEAR_FULL_EDGE_EDGE] else 0)
             solver.detector.narrow.reserve(candidates)
             grew = True
         return grew

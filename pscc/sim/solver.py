@@ -185,7 +185,6 @@ class ClothSolver:
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
         self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device)
-        self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device)
         # Room for contact before it happens (the device path flags an overflow and redoes the frame).
         self.projection.reserve(self.cloth_face_count // 4)
         self.proximity.springs.ensure(self.cloth_face_count // 4)
@@ -198,6 +197,9 @@ class ClothSolver:
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
+        # The check runs after the step's pairs were consumed, so it borrows the detector's hash tables.
+        self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device,
+                                                    spatial_hash=getattr(self.detector, "spatial_hash", None))
         initial = self._cloth_crossings(vertices)
         self.initial_crossings = int(initial.shape[0])
         """Edge-face crossings of the initial state (non-zero only with ``allow_initial_intersections``)."""
@@ -229,7 +231,8 @@ class ClothSolver:
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``.
 
-        ``collision`` (the detector's own accounting: BVH, front, hash tables, pair buffers),
+        ``collision`` (the detector's own accounting: BVH, front, hash tables, pair buffers; the
+        intersection check shares the hash tables and does not count them again),
         ``contact_springs``, ``projection`` (penetration-handling buffers), ``intersection_check``,
         ``integrator`` (block-sparse system, PCG vectors and the model's arrays). States are owned by
         the caller and not counted.
@@ -238,6 +241,8 @@ class ClothSolver:
         springs = self.proximity.springs
         contact = springs.vertices.capacity + springs.weights.capacity + springs.normals.capacity
         seen: set[int] = {id(springs.vertices), id(springs.weights), id(springs.normals)}
+        # The detector's own accounting holds its hash, which the intersection check may share.
+        seen.add(id(getattr(self.detector, "spatial_hash", None)))
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": int(contact),
