@@ -353,7 +353,9 @@ class ClothSolver:
 
         Returns:
             Frame stats: ``steps``, ``seconds`` (``total``; per stage only for frames that fell back)
-            and ``counts`` as :meth:`step` sums them, plus ``device_fallbacks`` and ``graph_replays``;
+            and ``counts`` as :meth:`step` sums them, plus ``device_fallbacks``, ``graph_recordings`` (1 when
+            this frame recorded the graph, then replayed it) and ``graph_replays`` (1 when it replayed a
+            graph recorded earlier);
             a frame that fell back also has ``fallback_reason``.
 
         Raises:
@@ -370,7 +372,7 @@ class ClothSolver:
         if self.model.handle_count:
             runner.upload_targets(np.stack([self._kinematic_targets(t) for t in times[1:]]))
         runner.save(state)
-        replayed = self._run_device_frame(runner, state, scratch, float(dt), steps, graph)
+        mode = self._run_device_frame(runner, state, scratch, float(dt), steps, graph)
         report = runner.read_report()
         failed = [name for flag, name in FLAG_NAMES.items() if report[flag]]
         if report[FLAG_OVERFLOW]:  # the other flags of the frame are then its consequences
@@ -383,7 +385,8 @@ class ClothSolver:
                 self._frame_graph_warm = None
             self.time = times[-1]
             counts = _new_stats()["counts"]
-            counts.update(report_counts(report), device_fallbacks=0, graph_replays=int(replayed))
+            counts.update(report_counts(report), device_fallbacks=0, graph_recordings=int(mode == "recorded"),
+                          graph_replays=int(mode == "replayed"))
             return {"steps": steps, "seconds": {"total": time.perf_counter() - started}, "counts": counts}
         # Rare: restore the frame's start and run it on the host path (halvings, impact zones, growth).
         runner.restore()
@@ -424,7 +427,7 @@ class ClothSolver:
         if current is not state:
             wp.copy(state.positions, current.positions)
             wp.copy(state.velocities, current.velocities)
-        counts.update(device_fallbacks=0, graph_replays=0)
+        counts.update(device_fallbacks=0, graph_recordings=0, graph_replays=0)
         seconds["total"] = time.perf_counter() - started
         return {"steps": steps, "seconds": seconds, "counts": counts}
 
@@ -434,23 +437,23 @@ class ClothSolver:
         return self._device_step
 
     def _run_device_frame(self, runner: DeviceStep, state: ClothState, scratch: ClothState, dt: float, steps: int,
-                          graph: bool) -> bool:
+                          graph: bool) -> str:
         """Run the frame's steps on the device: replay the recorded graph when it fits, else launch
-        eagerly (and record a graph once an eager frame of this shape has succeeded). Returns whether
-        the graph was replayed."""
+        eagerly (and record a graph once an eager frame of this shape has succeeded). Returns
+        ``"replayed"``, ``"recorded"`` (recorded, then replayed) or ``"eager"``."""
         key = (state.positions.ptr, scratch.positions.ptr, dt, steps)
         if graph and self._frame_graph is not None and self._frame_graph[0] == key:
             wp.capture_launch(self._frame_graph[1])
-            return True
+            return "replayed"
         if graph and self._frame_graph_warm == key:
             with wp.ScopedCapture(device=self.device) as capture:
                 self._launch_frame(runner, state, scratch, dt, steps)
             self._frame_graph = (key, capture.graph)
             wp.capture_launch(capture.graph)
-            return True
+            return "recorded"
         self._launch_frame(runner, state, scratch, dt, steps)
         self._frame_graph_warm = key
-        return False
+        return "eager"
 
     def _launch_frame(self, runner: DeviceStep, state: ClothState, scratch: ClothState, dt: float,
                       steps: int) -> None:

@@ -39,10 +39,11 @@ def _frames(name: str, triangles: int, frames: int, graph: bool, device: str = "
 
 @pytest.mark.parametrize("name", ["drape", "stack", "twist"])
 def test_replayed_frames_equal_eager_frames_bit_for_bit(name: str) -> None:
-    graph_sim, replayed = _frames(name, 300, 8, graph=True)
-    eager_sim, eager = _frames(name, 300, 8, graph=False)
+    graph_sim, replayed = _frames(name, 300, 12, graph=True)
+    eager_sim, eager = _frames(name, 300, 12, graph=False)
     assert sum(f["counts"]["graph_replays"] for f in graph_sim.frame_stats) >= 2
-    assert sum(f["counts"]["graph_replays"] for f in eager_sim.frame_stats) == 0
+    assert sum(f["counts"]["graph_recordings"] for f in graph_sim.frame_stats) >= 1
+    assert sum(f["counts"]["graph_replays"] + f["counts"]["graph_recordings"] for f in eager_sim.frame_stats) == 0
     for frame, (a, b) in enumerate(zip(replayed, eager, strict=True)):
         np.testing.assert_array_equal(a, b, err_msg=f"{name}: frame {frame + 1}")
     assert _intersection_free(graph_sim)
@@ -62,7 +63,7 @@ def test_device_frames_are_intersection_free_on_every_device(device: str) -> Non
 @pytest.mark.parametrize("name", ["drape", "stack"])
 def test_a_steady_state_frame_reads_one_report_and_uploads_nothing_but_targets(name: str) -> None:
     sim = Simulation(build_scene(name, 300), device="cpu")
-    for _ in range(7):  # warm-up: the buffers grow while the contact builds up (frames that fall back)
+    for _ in range(11):  # warm-up: the buffers grow while the contact builds up (frames that fall back)
         sim.step_frame()
     with count_host_traffic() as counts:
         record = sim.step_frame()
