@@ -9,34 +9,41 @@ conservative + external forces at ``x_t``. Element by element, ``A_e = dt D_e + 
 right-hand side gets ``dt f_e - A_e v``; damping and friction forces therefore enter only through
 their blocks (they are linear in v).
 
-Triplet layout of the element blocks (every element writes its own blocks; duplicates are summed):
+Memory layout (nothing is stored per element block; two scalars per contact slot):
 
-====================================  ===========  =============================================
-triplet range                         writer       blocks
-====================================  ===========  =============================================
-[0, n)                                vertex       (i, i): mass (or the Dirichlet scale)
-[n, n + 9 m)                          face         (a, b) for a, b in the face's 3 vertices
-[.. , .. + 16 hinge_count)            hinge        (a, b) for a, b in the hinge's 4 vertices
-====================================  ===========  =============================================
+==========================  ====================  ==========================================================
+buffer                      size                  contents
+==========================  ====================  ==========================================================
+``matrix`` (BSR)            nnz blocks            element blocks: mass (or the Dirichlet scale) on the
+                                                  diagonal, plus every (a, b) pair of a face or hinge
+``contact_coefficients``    contact capacity      vec2 ``(alpha, beta)`` of each contact's block K
+``rhs``, ``v_ref``          n vec3                right-hand side and reference velocities
+==========================  ====================  ==========================================================
 
-The element blocks (vertex, face and hinge ranges) have a sparsity pattern fixed by the mesh: the BSR
-matrix is allocated once with every (a, b) pair of a face or hinge and every diagonal block, and each
-step zeroes its values and adds every element triplet into its block (a binary search in the row),
-which costs far less than rebuilding the matrix from triplets (sort, unique, prefix sums) every step.
+The element blocks (vertex, face and hinge) have a sparsity pattern fixed by the mesh: the BSR matrix
+is allocated once with every (a, b) pair of a face or hinge and every diagonal block. Each step
+rewrites every block row (zero blocks and the mass block, one thread per vertex), then every face and
+hinge adds its blocks straight into their slots: a binary search in the row's sorted columns (rows
+hold about 10 blocks) finds the slot, so neither a triplet buffer (9 blocks per face and 16 per hinge,
+about 1.4 KB per triangle) nor a per-block slot table (about 130 B per triangle) is needed.
 Contacts change their pattern every step and have rank structure: the 16 blocks of a contact with
-vertex weights w are ``w_a w_b K`` (``K = dt^2 k_c n n^T + dt c (I - n n^T)``), so each contact stores
-only its 3x3 ``K`` and is applied matrix-free, ``A x = A_elements x + sum_c w (K sum_b w_b x_b)``
-(:meth:`ImplicitSystem.apply`: 4 gathers and 4 scatters per contact instead of 16 block products),
-with ``w_a^2 K`` added to the preconditioner's diagonal (:meth:`ImplicitSystem.diagonal`).
+vertex weights w are ``w_a w_b K`` with ``K = alpha n n^T + beta (I - n n^T)``, ``alpha = dt^2 k_c``
+and ``beta = dt c``. The normal n is the spring's, so each contact stores only ``(alpha, beta)`` (8 B
+instead of a 36 B mat33). Recomputing them in every product instead (from x_t, v_ref, the masses and
+the friction) would drop even those, but doubles the frame time of a contact-heavy scene (CG applies
+A hundreds of times per frame). Contacts are applied matrix-free,
+``A x = A_elements x + sum_c w (K sum_b w_b x_b)`` (:meth:`ImplicitSystem.apply`: 4 gathers and 4
+scatters per contact instead of 16 block products), with ``w_a^2 K`` added to the preconditioner's
+diagonal (:meth:`ImplicitSystem.diagonal`).
 
 Dirichlet rows (scripted and massless vertices): the row and column of vertex i are replaced by
 ``s_i I`` (s_i its mass, or 1) with ``b_i = s_i dv_i`` for the prescribed ``dv_i``. Element blocks
-touching such a vertex are written as zero blocks, and free rows move the
+touching such a vertex add nothing to the matrix, and free rows move the
 known part to the right-hand side: ``b_k -= A_kj v_ref_j`` with ``v_ref_j`` the prescribed new
 velocity of j, which is the same as ``-A_kj (v_j + dv_j)``. Free vertices use ``v_ref = v_t``.
 
-Force accumulation into ``b`` uses float atomics: bitwise reproducible on the CPU; on CUDA set
-``wp.config.deterministic`` before import for run-to-run reproducibility.
+Accumulation into ``b`` and into the matrix blocks uses float atomics: bitwise reproducible on the
+CPU; on CUDA set ``wp.config.deterministic`` before import for run-to-run reproducibility.
 """
 
 from __future__ import annotations
@@ -82,12 +89,13 @@ class StepParams:
 
 
 @wp.struct
-class Triplets:
-    """COO blocks: row and column vertex ids and the 3x3 block."""
+class BlockMatrix:
+    """Device view of the fixed-pattern BSR element matrix, and the count of blocks not in its pattern."""
 
-    rows: wp.array(dtype=wp.int32)
-    cols: wp.array(dtype=wp.int32)
+    offsets: wp.array(dtype=wp.int32)
+    columns: wp.array(dtype=wp.int32)
     values: wp.array(dtype=wp.mat33)
+    missing: wp.array(dtype=wp.int32)
 
 
 @wp.struct
@@ -102,17 +110,37 @@ class ContactArrays:
 
 
 @wp.func
-def _emit_block(triplets: Triplets, slot: int, i: int, j: int, block: wp.mat33, kind: wp.array(dtype=wp.int32),
-                v_ref: wp.array(dtype=wp.vec3), rhs: wp.array(dtype=wp.vec3)):
-    """Write block (i, j) of an element; move ``A_ij v_ref_j`` to the right-hand side of a free row i."""
-    triplets.rows[slot] = i
-    triplets.cols[slot] = j
-    value = wp.mat33(0.0)
-    if kind[i] == _FREE:
-        wp.atomic_sub(rhs, i, block * v_ref[j])
-        if kind[j] == _FREE:
-            value = block
-    triplets.values[slot] = value
+def _block_index(offsets: wp.array(dtype=wp.int32), columns: wp.array(dtype=wp.int32), row: int, col: int) -> int:
+    """Position of block (row, col) in a BSR matrix with sorted columns per row; -1 when absent."""
+    lo = offsets[row]
+    end = offsets[row + 1]
+    hi = end
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if columns[mid] < col:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < end:
+        if columns[lo] == col:
+            return lo
+    return -1
+
+
+@wp.func
+def _add_block(matrix: BlockMatrix, i: int, j: int, block: wp.mat33, kind: wp.array(dtype=wp.int32),
+               v_ref: wp.array(dtype=wp.vec3), rhs: wp.array(dtype=wp.vec3)):
+    """Add block (i, j) of an element into the matrix (both rows free); move ``A_ij v_ref_j`` to the
+    right-hand side of a free row i. Rows and columns of Dirichlet vertices get nothing."""
+    if kind[i] != _FREE:
+        return
+    wp.atomic_sub(rhs, i, block * v_ref[j])
+    if kind[j] == _FREE:
+        index = _block_index(matrix.offsets, matrix.columns, i, j)
+        if index >= 0:
+            wp.atomic_add(matrix.values, index, block)
+        else:
+            wp.atomic_add(matrix.missing, 0, 1)
 
 
 @wp.func
@@ -120,14 +148,6 @@ def _emit_force(i: int, force: wp.vec3, dt: float, kind: wp.array(dtype=wp.int32
     """Add ``dt * force`` to the right-hand side of a free row i."""
     if kind[i] == _FREE:
         wp.atomic_add(rhs, i, dt * force)
-
-
-@wp.func
-def _emit_empty(triplets: Triplets, slot: int, i: int):
-    """Write a zero block on the diagonal of vertex i (a placeholder the BSR build drops)."""
-    triplets.rows[slot] = i
-    triplets.cols[slot] = i
-    triplets.values[slot] = wp.mat33(0.0)
 
 
 @wp.kernel
@@ -141,33 +161,36 @@ def _prepare_vertices(
     warm_start: int,
     # out:
     v_ref: wp.array(dtype=wp.vec3),
-    triplets: Triplets,
+    matrix: BlockMatrix,
     rhs: wp.array(dtype=wp.vec3),
     dv: wp.array(dtype=wp.vec3),
 ):
-    """One thread per vertex: mass block, gravity, Dirichlet rows and the initial guess of dv."""
+    """One thread per vertex: its block row (zeros and the mass block), gravity, Dirichlet rows and the
+    initial guess of dv."""
     i = wp.tid()
     mass = vertices.mass[i]
     kind = vertices.kind[i]
     v = velocities[i]
     dt = params.dt
-    triplets.rows[i] = i
-    triplets.cols[i] = i
+    scale = mass
     if kind == _FREE:
         v_ref[i] = v
-        triplets.values[i] = wp.identity(n=3, dtype=float) * mass
         rhs[i] = (dt * mass) * params.gravity
         if warm_start == 0:
             dv[i] = wp.vec3(0.0)
-        return
-    target_velocity = v + dt * params.gravity  # massless: ballistic
-    if kind == _SCRIPTED:
-        target_velocity = (targets[i] - positions[i]) / dt
-    scale = wp.where(mass > 0.0, mass, 1.0)
-    v_ref[i] = target_velocity
-    triplets.values[i] = wp.identity(n=3, dtype=float) * scale
-    rhs[i] = scale * (target_velocity - v)
-    dv[i] = target_velocity - v
+    else:
+        target_velocity = v + dt * params.gravity  # massless: ballistic
+        if kind == _SCRIPTED:
+            target_velocity = (targets[i] - positions[i]) / dt
+        scale = wp.where(mass > 0.0, mass, 1.0)
+        v_ref[i] = target_velocity
+        rhs[i] = scale * (target_velocity - v)
+        dv[i] = target_velocity - v
+    for k in range(matrix.offsets[i], matrix.offsets[i + 1]):
+        if matrix.columns[k] == i:
+            matrix.values[k] = wp.identity(n=3, dtype=float) * scale
+        else:
+            matrix.values[k] = wp.mat33(0.0)
 
 
 @wp.kernel
@@ -178,9 +201,8 @@ def _assemble_faces(
     positions: wp.array(dtype=wp.vec3),
     v_ref: wp.array(dtype=wp.vec3),
     params: StepParams,
-    offset: int,
     # out:
-    triplets: Triplets,
+    matrix: BlockMatrix,
     rhs: wp.array(dtype=wp.vec3),
 ):
     """One thread per face: membrane force, its 9 Hessian/damping blocks, and air drag."""
@@ -219,7 +241,7 @@ def _assemble_faces(
             block = block + wp.identity(n=3, dtype=float) * geometric
             if a == b:
                 block = block + drag_block
-            _emit_block(triplets, offset + 9 * f + 3 * a + b, ids[a], ids[b], block, kind, v_ref, rhs)
+            _add_block(matrix, ids[a], ids[b], block, kind, v_ref, rhs)
 
 
 @wp.kernel
@@ -230,22 +252,18 @@ def _assemble_hinges(
     positions: wp.array(dtype=wp.vec3),
     v_ref: wp.array(dtype=wp.vec3),
     params: StepParams,
-    offset: int,
     # out:
-    triplets: Triplets,
+    matrix: BlockMatrix,
     rhs: wp.array(dtype=wp.vec3),
 ):
-    """One thread per hinge: bending force and its 16 Gauss-Newton blocks (zero when degenerate)."""
+    """One thread per hinge: bending force and its 16 Gauss-Newton blocks (nothing when degenerate)."""
     h = wp.tid()
     ids = hinges.indices[h]
     x0 = positions[ids[0]]
     x1 = positions[ids[1]]
     x2 = positions[ids[2]]
     x3 = positions[ids[3]]
-    base = offset + 16 * h
     if hinge_is_degenerate(x0, x1, x2, x3, hinges.rest_length[h], params.hinge_degeneracy_ratio):
-        for a in range(16):
-            _emit_empty(triplets, base + a, ids[0])
         return
     dt = params.dt
     stiffness = hinges.stiffness[h]
@@ -256,7 +274,7 @@ def _assemble_hinges(
         _emit_force(ids[a], (-stiffness * delta) * gradient[a], dt, kind, rhs)
         for b in range(4):
             block = block_scale * wp.outer(gradient[a], gradient[b])
-            _emit_block(triplets, base + 4 * a + b, ids[a], ids[b], block, kind, v_ref, rhs)
+            _add_block(matrix, ids[a], ids[b], block, kind, v_ref, rhs)
 
 
 @wp.func
@@ -271,6 +289,13 @@ def _contact_is_valid(contacts: ContactArrays, c: int, vertex_count: int) -> boo
     return True
 
 
+@wp.func
+def _contact_block(coefficients: wp.vec2, n: wp.vec3) -> wp.mat33:
+    """The contact block ``K = alpha n n^T + beta (I - n n^T)`` from its two coefficients (alpha, beta)."""
+    nn = wp.outer(n, n)
+    return coefficients[0] * nn + coefficients[1] * (wp.identity(n=3, dtype=float) - nn)
+
+
 @wp.kernel
 def _assemble_contacts(
     # in:
@@ -280,16 +305,16 @@ def _assemble_contacts(
     v_ref: wp.array(dtype=wp.vec3),
     params: StepParams,
     # out:
-    blocks: wp.array(dtype=wp.mat33),
+    coefficients: wp.array(dtype=wp.vec2),
     rhs: wp.array(dtype=wp.vec3),
 ):
-    """One thread per contact slot: spring force and friction damper, and the contact's block K.
+    """One thread per contact slot: spring force and friction damper, and the coefficients of its block K.
 
     The contact's 16 blocks are ``A_ab = w_a w_b K`` (a, b free) with ``K = dt^2 k_c n n^T + dt c (I - n n^T)``;
-    only K is stored (zero for an inactive slot) and applied matrix-free.
+    only ``(dt^2 k_c, dt c)`` is stored (zero for an inactive slot): the normal n is the spring's.
     """
     c = wp.tid()
-    blocks[c] = wp.mat33(0.0)
+    coefficients[c] = wp.vec2(0.0)
     if not _contact_is_valid(contacts, c, positions.shape[0]):
         return
     ids = contacts.vertices[c]
@@ -317,51 +342,14 @@ def _assemble_contacts(
     normal_force = -stiffness * gap  # > 0
     tangential = relative_velocity - wp.dot(relative_velocity, n) * n
     damping = friction * normal_force / wp.max(wp.length(tangential), params.friction_epsilon)
-    block = (dt * dt * stiffness) * wp.outer(n, n) + (dt * damping) * (wp.identity(n=3, dtype=float) - wp.outer(n, n))
-    blocks[c] = block
+    coefficient = wp.vec2(dt * dt * stiffness, dt * damping)
+    coefficients[c] = coefficient
     # Free rows: dt f_a and the moved-over known part -sum_b A_ab v_ref_b = -w_a K (sum_b w_b v_ref_b).
-    known = block * relative_velocity
+    known = _contact_block(coefficient, n) * relative_velocity
     for a in range(4):
         _emit_force(ids[a], (normal_force * w[a]) * n, dt, vertices.kind, rhs)
         if vertices.kind[ids[a]] == _FREE:
             wp.atomic_sub(rhs, ids[a], w[a] * known)
-
-
-@wp.func
-def _block_index(offsets: wp.array(dtype=wp.int32), columns: wp.array(dtype=wp.int32), row: int, col: int) -> int:
-    """Position of block (row, col) in a BSR matrix with sorted columns per row; -1 when absent."""
-    lo = offsets[row]
-    end = offsets[row + 1]
-    hi = end
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if columns[mid] < col:
-            lo = mid + 1
-        else:
-            hi = mid
-    if lo < end:
-        if columns[lo] == col:
-            return lo
-    return -1
-
-
-@wp.kernel
-def _add_element_blocks(
-    # in:
-    triplets: Triplets,
-    offsets: wp.array(dtype=wp.int32),
-    columns: wp.array(dtype=wp.int32),
-    # out:
-    values: wp.array(dtype=wp.mat33),
-    missing: wp.array(dtype=wp.int32),
-):
-    """One thread per element triplet: add its block into the fixed-pattern BSR values."""
-    s = wp.tid()
-    index = _block_index(offsets, columns, triplets.rows[s], triplets.cols[s])
-    if index >= 0:
-        wp.atomic_add(values, index, triplets.values[s])
-    else:
-        wp.atomic_add(missing, 0, 1)
 
 
 @wp.kernel
@@ -391,22 +379,27 @@ def _add_contact_products(
     # in:
     contacts: ContactArrays,
     kind: wp.array(dtype=wp.int32),
-    blocks: wp.array(dtype=wp.mat33),
+    coefficients: wp.array(dtype=wp.vec2),
     x: wp.array(dtype=wp.vec3),
     # out:
     y: wp.array(dtype=wp.vec3),
 ):
-    """One thread per contact: ``y_a += w_a K sum_b w_b x_b`` over its free vertices a and b."""
+    """One thread per contact slot: ``y_a += w_a K sum_b w_b x_b`` over its free vertices a and b."""
     c = wp.tid()
     if not _contact_is_valid(contacts, c, x.shape[0]):
         return
+    coefficient = coefficients[c]
+    if coefficient[0] == 0.0 and coefficient[1] == 0.0:
+        return  # inactive: K = 0
     ids = contacts.vertices[c]
     w = contacts.weights[c]
     combined = wp.vec3(0.0)
     for b in range(4):
         if kind[ids[b]] == _FREE:
             combined = combined + w[b] * x[ids[b]]
-    product = blocks[c] * combined
+    # K combined in rank-one form: beta combined + (alpha - beta) (n . combined) n.
+    n = contacts.normals[c]
+    product = coefficient[1] * combined + ((coefficient[0] - coefficient[1]) * wp.dot(n, combined)) * n
     for a in range(4):
         if kind[ids[a]] == _FREE:
             wp.atomic_add(y, ids[a], w[a] * product)
@@ -417,36 +410,63 @@ def _add_contact_diagonal(
     # in:
     contacts: ContactArrays,
     kind: wp.array(dtype=wp.int32),
-    blocks: wp.array(dtype=wp.mat33),
+    coefficients: wp.array(dtype=wp.vec2),
     vertex_count: int,
     # out:
     diagonal: wp.array(dtype=wp.mat33),
 ):
-    """One thread per contact: add ``w_a^2 K`` to the diagonal block of each free vertex a."""
+    """One thread per contact slot: add ``w_a^2 K`` to the diagonal block of each free vertex a."""
     c = wp.tid()
     if not _contact_is_valid(contacts, c, vertex_count):
         return
+    coefficient = coefficients[c]
+    if coefficient[0] == 0.0 and coefficient[1] == 0.0:
+        return
     ids = contacts.vertices[c]
     w = contacts.weights[c]
+    block = _contact_block(coefficient, contacts.normals[c])
     for a in range(4):
         if kind[ids[a]] == _FREE:
-            wp.atomic_add(diagonal, ids[a], (w[a] * w[a]) * blocks[c])
+            wp.atomic_add(diagonal, ids[a], (w[a] * w[a]) * block)
+
+
+@wp.kernel
+def _write_contact_blocks(
+    # in:
+    contacts: ContactArrays,
+    coefficients: wp.array(dtype=wp.vec2),
+    # out:
+    blocks: wp.array(dtype=wp.mat33),
+):
+    """One thread per contact slot: its block K (zero when inactive), for host inspection."""
+    c = wp.tid()
+    blocks[c] = _contact_block(coefficients[c], contacts.normals[c])
 
 
 class ImplicitSystem:
-    """Owns the triplet buffers, the element matrix, the contact blocks and the right-hand side of one step.
+    """Owns the element matrix, the contact coefficients, the right-hand side and the reference
+    velocities of one step.
 
     The system matrix is ``A = matrix + contact blocks``: apply it with :meth:`apply`, get its diagonal
-    blocks with :meth:`diagonal` and the whole of it on the host with :meth:`dense`.
+    blocks with :meth:`diagonal` and the whole of it on the host with :meth:`dense`. Buffers::
+
+        matrix                BSR, (n x n blocks of 3x3), nnz = n + distinct face/hinge pairs
+          offsets (n + 1,)    columns (nnz,) sorted per row      values (nnz,) mat33
+        contact_coefficients  (contact capacity,) vec2 (alpha, beta) of each contact's K
+        rhs                   (n,) vec3
+        reference_velocities  (n,) vec3
+
+    Nothing is stored per element block: faces and hinges add into ``matrix.values`` directly.
 
     Args:
         model: The cloth.
 
     Attributes:
         matrix: (n x n blocks of 3x3) BSR matrix of the element blocks (mass, faces, hinges) [kg], with
-            the fixed pattern of the mesh; its values are refilled by every :meth:`assemble`.
-        contact_blocks: (contact capacity,) mat33 ``K`` of each contact of the last :meth:`assemble`
-            (its 16 blocks are ``w_a w_b K``; zero for an inactive slot) [kg].
+            the fixed pattern of the mesh; its values are rewritten by every :meth:`assemble`.
+        contact_coefficients: (contact capacity,) vec2 ``(alpha, beta) = (dt^2 k_c, dt c)`` of each
+            contact of the last :meth:`assemble` [kg]: its block is ``K = alpha n n^T + beta (I - n n^T)``
+            with n the spring's normal, and its 16 blocks are ``w_a w_b K`` (zero for an inactive slot).
         rhs: (n,) vec3 right-hand side b [kg m/s].
         reference_velocities: (n,) vec3 ``v_ref``: v_t for free vertices, the prescribed new velocity
             for Dirichlet vertices [m/s].
@@ -456,37 +476,29 @@ class ImplicitSystem:
         self.model = model
         self.device = model.device
         n = model.vertex_count
-        self._face_offset = n
-        self._hinge_offset = n + 9 * model.face_count
-        self._element_slots = self._hinge_offset + 16 * model.hinge_count
         self._contacts: ContactArrays | None = None
         self._product_launches: dict[tuple[int, int], list] = {}
-        self.triplets = Triplets()
-        size = max(1, self._element_slots)
-        self.triplets.rows = wp.zeros(size, dtype=wp.int32, device=self.device)
-        self.triplets.cols = wp.zeros(size, dtype=wp.int32, device=self.device)
-        self.triplets.values = wp.zeros(size, dtype=wp.mat33, device=self.device)
-        self.contact_blocks = wp.zeros(1, dtype=wp.mat33, device=self.device)
+        self.contact_coefficients = wp.zeros(1, dtype=wp.vec2, device=self.device)
         self.matrix = bsr_zeros(n, n, wp.mat33, device=self.device)
         self._build_pattern()
         self._missing = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self._matrix_view = BlockMatrix()
+        self._matrix_view.offsets = self.matrix.offsets
+        self._matrix_view.columns = self.matrix.columns
+        self._matrix_view.values = self.matrix.values
+        self._matrix_view.missing = self._missing
         self.rhs = wp.zeros(n, dtype=wp.vec3, device=self.device)
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
 
-    @property
-    def triplet_capacity(self) -> int:
-        """Number of element COO block slots (vertices, faces, hinges)."""
-        return int(self.triplets.rows.shape[0])
-
     def reserve_contacts(self, capacity: int) -> None:
-        """Make room for ``capacity`` contact blocks. Allocates: only when growing. Capture-safe: no."""
-        if capacity > self.contact_blocks.shape[0]:
-            self.contact_blocks = wp.zeros(int(capacity), dtype=wp.mat33, device=self.device)
+        """Make room for ``capacity`` contact coefficients. Allocates: only when growing. Capture-safe: no."""
+        if capacity > self.contact_coefficients.shape[0]:
+            self.contact_coefficients = wp.zeros(int(capacity), dtype=wp.vec2, device=self.device)
 
     def assemble(self, positions: wp.array, velocities: wp.array, targets: wp.array, params: StepParams,
                  contacts: ContactSprings | None, dv: wp.array, *, warm_start: bool = False) -> None:
-        """Fill :attr:`matrix`, :attr:`contact_blocks` and :attr:`rhs` for the state (x_t, v_t); write the
-        initial guess into ``dv``.
+        """Fill :attr:`matrix`, :attr:`contact_coefficients` and :attr:`rhs` for the state (x_t, v_t);
+        write the initial guess into ``dv``.
 
         Args:
             positions: (n,) vec3 x_t [m].
@@ -499,23 +511,22 @@ class ImplicitSystem:
                 free vertices 0 or, with ``warm_start``, the value ``dv`` already holds (the last step's).
             warm_start: Keep ``dv`` of free vertices as the initial guess.
 
-        Allocates: only when the contact capacity grows. Capture-safe: no.
+        Allocates: only when the contact capacity grows. Capture-safe: yes once :meth:`reserve_contacts`
+        covers the contacts' capacity.
         """
         model = self.model
         n = model.vertex_count
         wp.launch(_prepare_vertices, dim=n, device=self.device,
                   inputs=[model.vertices, targets, positions, velocities, params, int(warm_start)],
-                  outputs=[self.reference_velocities, self.triplets, self.rhs, dv])
+                  outputs=[self.reference_velocities, self._matrix_view, self.rhs, dv])
         if model.face_count:
             wp.launch(_assemble_faces, dim=model.face_count, device=self.device,
-                      inputs=[model.faces, model.vertices.kind, positions, self.reference_velocities, params,
-                              self._face_offset],
-                      outputs=[self.triplets, self.rhs])
+                      inputs=[model.faces, model.vertices.kind, positions, self.reference_velocities, params],
+                      outputs=[self._matrix_view, self.rhs])
         if model.hinge_count:
             wp.launch(_assemble_hinges, dim=model.hinge_count, device=self.device,
-                      inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params,
-                              self._hinge_offset],
-                      outputs=[self.triplets, self.rhs])
+                      inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params],
+                      outputs=[self._matrix_view, self.rhs])
         self._contacts = None
         self._product_launches = {}
         if contacts is not None and contacts.capacity > 0:
@@ -528,12 +539,8 @@ class ImplicitSystem:
             view.rest_gap = contacts.rest_gap
             wp.launch(_assemble_contacts, dim=contacts.capacity, device=self.device,
                       inputs=[view, model.vertices, positions, self.reference_velocities, params],
-                      outputs=[self.contact_blocks, self.rhs])
+                      outputs=[self.contact_coefficients, self.rhs])
             self._contacts = view
-        self.matrix.values.zero_()
-        wp.launch(_add_element_blocks, dim=self._element_slots, device=self.device,
-                  inputs=[self.triplets, self.matrix.offsets, self.matrix.columns],
-                  outputs=[self.matrix.values, self._missing])
 
     def apply(self, x: wp.array, y: wp.array) -> None:
         """``y = A x`` with the last assembled system (element matrix plus contact blocks).
@@ -551,7 +558,7 @@ class ImplicitSystem:
             if self._contacts is not None:
                 commands.append(wp.launch(_add_contact_products, dim=self._contacts.vertices.shape[0],
                                           device=self.device, inputs=[self._contacts, self.model.vertices.kind,
-                                                                      self.contact_blocks, x],
+                                                                      self.contact_coefficients, x],
                                           outputs=[y], record_cmd=True))
             self._product_launches[key] = commands
         for command in commands:
@@ -562,11 +569,28 @@ class ImplicitSystem:
         bsr_get_diag(self.matrix, out=out)
         if self._contacts is not None:
             wp.launch(_add_contact_diagonal, dim=self._contacts.vertices.shape[0], device=self.device,
-                      inputs=[self._contacts, self.model.vertices.kind, self.contact_blocks,
+                      inputs=[self._contacts, self.model.vertices.kind, self.contact_coefficients,
                               self.model.vertex_count], outputs=[out])
 
+    def contact_blocks(self) -> np.ndarray:
+        """(contact capacity, 3, 3) float32 block K of every contact slot of the last :meth:`assemble`
+        (its 16 blocks are ``w_a w_b K``; zero for an unused or separated slot) [kg]; (0, 3, 3) without
+        contacts. For tests and debugging; a sync point.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        if self._contacts is None:
+            return np.zeros((0, 3, 3), np.float32)
+        blocks = wp.zeros(self._contacts.vertices.shape[0], dtype=wp.mat33, device=self.device)
+        wp.launch(_write_contact_blocks, dim=blocks.shape[0], device=self.device,
+                  inputs=[self._contacts, self.contact_coefficients], outputs=[blocks])
+        return blocks.numpy()
+
     def dense(self) -> np.ndarray:
-        """The whole system matrix A on the host, (3n, 3n) float64 (for tests and debugging)."""
+        """The whole system matrix A on the host, (3n, 3n) float64 (for tests and debugging). A sync point.
+
+        Allocates: yes. Capture-safe: no.
+        """
         n = self.model.vertex_count
         matrix = self.matrix
         nnz = matrix.nnz_sync()
@@ -580,7 +604,7 @@ class ImplicitSystem:
             used = min(int(contacts.count.numpy()[0]), contacts.vertices.shape[0])
             ids = contacts.vertices.numpy()[:used]
             weights = contacts.weights.numpy()[:used].astype(np.float64)
-            blocks = self.contact_blocks.numpy()[:used].astype(np.float64)
+            blocks = self.contact_blocks()[:used].astype(np.float64)
             free = self.model.vertices.kind.numpy() == VERTEX_FREE
             for c in range(used):
                 if np.any(ids[c] < 0) or np.any(ids[c] >= n):
@@ -592,8 +616,11 @@ class ImplicitSystem:
         return dense.reshape(3 * n, 3 * n)
 
     def missing_blocks(self) -> int:
-        """Element triplets that found no block of the fixed pattern since the start (always 0 unless a
-        kernel writes outside its element; a sync point)."""
+        """Element blocks that found no slot of the fixed pattern since the start (always 0 unless a
+        kernel writes outside its element). A sync point.
+
+        Allocates: no. Capture-safe: no.
+        """
         return int(self._missing.numpy()[0])
 
     def _build_pattern(self) -> None:

@@ -81,7 +81,7 @@ def _invert_diagonal_blocks(
     # out:
     inverse: wp.array(dtype=wp.mat33),
 ):
-    """One thread per vertex: inverse of its 3x3 diagonal block (or of its diagonal entries)."""
+    """One thread per vertex: inverse of its 3x3 diagonal block (or of its diagonal entries); in place is fine."""
     i = wp.tid()
     block = diagonal[i]
     if scalar_only != 0:
@@ -229,7 +229,7 @@ class ImplicitEuler:
         self.dv = wp.zeros(n, dtype=wp.vec3, device=self.device)
         self.targets = wp.clone(model.initial_positions)
         self.stats = StepStats()
-        self._diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
+        # The diagonal blocks of A, inverted in place each step (the preconditioner).
         self._inverse_diagonal = wp.zeros(n, dtype=wp.mat33, device=self.device)
         self._energies = wp.zeros(4, dtype=wp.float64, device=self.device)
         self._precondition_launches: dict[tuple[int, int], Any] = {}
@@ -316,9 +316,9 @@ class ImplicitEuler:
         self.system.assemble(state_in.positions, state_in.velocities, self.targets, params, contacts, self.dv,
                              warm_start=self.config.cg_warm_start)
         if self.config.preconditioner != "none":
-            self.system.diagonal(self._diagonal)
+            self.system.diagonal(self._inverse_diagonal)
             wp.launch(_invert_diagonal_blocks, dim=self.model.vertex_count, device=self.device,
-                      inputs=[self._diagonal, _PRECONDITIONER_MODE[self.config.preconditioner]],
+                      inputs=[self._inverse_diagonal, _PRECONDITIONER_MODE[self.config.preconditioner]],
                       outputs=[self._inverse_diagonal])
         self._solver.launch()
         wp.launch(_advance, dim=self.model.vertex_count, device=self.device,

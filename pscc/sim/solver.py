@@ -375,8 +375,9 @@ class ClothSolver:
         mode = self._run_device_frame(runner, state, scratch, float(dt), steps, graph)
         report = runner.read_report()
         failed = [name for flag, name in FLAG_NAMES.items() if report[flag]]
-        if report[FLAG_OVERFLOW]:  # the other flags of the frame are then its consequences
-            failed = [f"{FLAG_NAMES[FLAG_OVERFLOW]} ({runner.overflow_name(int(report[FLAG_OVERFLOW]))})"]
+        if report[FLAG_OVERFLOW]:  # named by the first buffer that overflowed
+            failed = [f"{FLAG_NAMES[FLAG_OVERFLOW]} ({runner.overflow_name(int(report[FLAG_OVERFLOW]))})",
+                      *(name for name in failed if name != FLAG_NAMES[FLAG_OVERFLOW])]
         if report[CG_FAILED] and not failed:
             failed = ["the linear solve overflowed"]
         if not failed:

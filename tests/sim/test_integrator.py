@@ -28,6 +28,30 @@ def dense_matrix(integrator: ImplicitEuler) -> np.ndarray:
     return integrator.system.dense()
 
 
+def contact_blocks_float64(model: ClothModel, integrator: ImplicitEuler, state: ClothState, springs: ContactSprings,
+                           dt: float) -> np.ndarray:
+    """K = dt^2 k_c n n^T + dt c (I - n n^T) of every stored contact, in float64 from the spring and state
+    (free vertices only: v_ref = v_t; automatic stiffness)."""
+    config = integrator.config
+    x = state.positions.numpy().astype(np.float64)
+    v = state.velocities.numpy().astype(np.float64)
+    mass = model.mass_host.astype(np.float64)
+    friction = model.vertices.friction.numpy().astype(np.float64)
+    count = int(springs.count.numpy()[0])
+    blocks = []
+    for ids, w, n in zip(springs.vertices.numpy()[:count], springs.weights.numpy()[:count].astype(np.float64),
+                         springs.normals.numpy()[:count].astype(np.float64), strict=True):
+        gap = n @ (w @ x[ids]) - springs.rest_gap
+        stiffness = config.contact_stiffness_scale / (np.sum(w**2 / mass[ids]) * dt**2)
+        relative = w @ v[ids]
+        tangential = relative - (relative @ n) * n
+        damping = np.sum(0.5 * np.abs(w) * friction[ids]) * (-stiffness * gap) / max(
+            np.linalg.norm(tangential), config.friction_velocity_epsilon)
+        nn = np.outer(n, n)
+        blocks.append(dt**2 * stiffness * nn + dt * damping * (np.eye(3) - nn))
+    return np.array(blocks)
+
+
 def simulate(integrator: ImplicitEuler, state: ClothState, steps: int, dt: float = DT, **kwargs):
     """Step ``steps`` times with double buffering; yield (step index, current state, stats)."""
     spare = state.clone()
@@ -254,13 +278,16 @@ def test_assembled_matrix_is_symmetric_positive_definite_and_cg_converges(device
         assert np.count_nonzero(a[rows]) == 3 and np.count_nonzero(a[:, rows]) == 3
     # Contacts couple vertices that share no face (5 and 14 do not; 1 and 9 do not).
     assert np.abs(a[15:18, 42:45]).max() > 0.0 and np.abs(a[3:6, 27:30]).max() > 0.0
-    # The fixed-pattern matrix equals the sum of every element triplet, and the contacts add w_a w_b K.
+    # A is the fixed-pattern element matrix plus w_a w_b K per contact, with K recomputed here in float64.
     system = integrator.system
-    used = system._element_slots
+    matrix = system.matrix
+    rows = np.repeat(np.arange(16), np.diff(matrix.offsets.numpy()))
     reference = np.zeros((16, 3, 16, 3))
-    np.add.at(reference, (system.triplets.rows.numpy()[:used], slice(None), system.triplets.cols.numpy()[:used]),
-              system.triplets.values.numpy()[:used].astype(np.float64))
-    blocks = system.contact_blocks.numpy().astype(np.float64)
+    np.add.at(reference, (rows, slice(None), matrix.columns.numpy()),
+              matrix.values.numpy().astype(np.float64))
+    blocks = system.contact_blocks().astype(np.float64)
+    expected_blocks = contact_blocks_float64(model, integrator, state, springs, DT)
+    np.testing.assert_allclose(blocks[:2], expected_blocks, rtol=1e-4, atol=1e-6 * np.abs(expected_blocks).max())
     weights = springs.weights.numpy().astype(np.float64)
     for c, ids in enumerate(springs.vertices.numpy()[:2]):
         assert np.abs(blocks[c]).max() > 0.0
