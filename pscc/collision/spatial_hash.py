@@ -36,9 +36,11 @@ group_start / group_end    (E,) / (G,) int32     entry range of group g (triangl
                                                  group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
-group_axis / group_slab    (G,) vec3 / vec2      slab test only: axis of group g / (min, max) of its
-                                                 faces' vertices on the axis (1 slot when off)
-group_mask                 (G,) uint64           slab test only: bit t = the t-th later group of the cell
+group_axis / group_slab    (S,) vec3 / vec2      slab test only: axis of group g / (min, max) of its
+                                                 faces' vertices on the axis (1 slot when off); S, the
+                                                 slab capacity, grows with the groups of slab-testing
+                                                 calls only
+group_mask                 (S,) uint64           slab test only: bit t = the t-th later group of the cell
                                                  passed (or was not tested)
 row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
 row_span                   (R,) vec3i            work row r = (g, b_start, b_end): entries of group g
@@ -306,6 +308,7 @@ class SpatialHash:
         self._pair_count = 0
         self._pair_reruns = 0
         self._last_call: tuple[bool, int] | None = None
+        self._last_slab = False
         self.stats = SpatialHashStats()
 
     # ------------------------------------------------------------------ buffers
@@ -333,11 +336,19 @@ class SpatialHash:
         self.group_capacity = capacity
         self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
         self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
-        slab_capacity = capacity if self.group_slab_test else 1
-        self.group_axis = wp.empty(slab_capacity, dtype=wp.vec3, device=dev)
-        self.group_slab = wp.empty(slab_capacity, dtype=wp.vec2, device=dev)
-        self.group_mask = wp.empty(slab_capacity, dtype=wp.uint64, device=dev)
+        if not hasattr(self, "group_axis"):
+            self._allocate_slabs(capacity if self.group_slab_test else 1)
         self._make_row_views()
+
+    def _allocate_slabs(self, capacity: int) -> None:
+        """Per-group slab-test tables, sized by the groups of the calls that slab-test (calls without
+        node ids, e.g. an intersection check sharing this hash, have one group per face and never
+        touch them)."""
+        dev = self.device
+        self.slab_capacity = max(1, int(capacity))
+        self.group_axis = wp.empty(self.slab_capacity, dtype=wp.vec3, device=dev)
+        self.group_slab = wp.empty(self.slab_capacity, dtype=wp.vec2, device=dev)
+        self.group_mask = wp.empty(self.slab_capacity, dtype=wp.uint64, device=dev)
 
     def _make_row_views(self) -> None:
         """The rank buffers are free once the tables are written: they hold the rows per group. The
@@ -514,6 +525,7 @@ class SpatialHash:
         node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
         self._last_call = (face_order is not None, node_limit)
+        self._last_slab = bool(slab.enabled)
         self._pair_count = 0
         dev = self.device
         wp.launch(kernels._reset_counters, dim=1, outputs=[self.info, self.counts, self.grid_max], device=dev)
@@ -537,17 +549,20 @@ class SpatialHash:
         """``(device counter, index, capacity)`` triples: after a device call, a counter above its
         capacity means :meth:`check_capacity` has work to do (a buffer to grow, wider cell bits or a
         deferred input error). For callers that gather overflow flags on the device; the capacities
-        change only in :meth:`check_capacity`."""
+        change only in :meth:`check_capacity`. Index 4 is the slab tables' capacity against the groups of
+        the last call when it slab-tested (never full otherwise)."""
         info = self.info
+        slab_groups = self.slab_capacity if self._last_slab else MAX_ENTRIES
         return [(info, kernels.INFO_ENTRIES, self.entry_capacity), (info, kernels.INFO_GROUPS, self.group_capacity),
                 (info, kernels.INFO_ROWS, self.row_capacity), (self.counts, 0, self.pair_capacity),
+                (info, kernels.INFO_GROUPS, slab_groups),
                 (info, kernels.INFO_WANTED_CELLS, 0), (info, kernels.INFO_BAD_BOXES, 0),
                 (info, kernels.INFO_BAD_NODES, 0), (info, kernels.INFO_BAD_ORDER, 0)]
 
     def grow(self, counters: set[int], factor: float = 1.5) -> None:
         """Grow the buffers behind the given :meth:`overflow_counters` indices (0 entries, 1 groups,
-        2 rows, 3 pairs) by ``factor`` ahead of an overflow (a caller that saw them nearly full). A
-        recorded call then holds stale buffers and must be recorded again.
+        2 rows, 3 pairs, 4 slab tables) by ``factor`` ahead of an overflow (a caller that saw them
+        nearly full). A recorded call then holds stale buffers and must be recorded again.
 
         Allocates: yes. Capture-safe: no.
         """
@@ -555,6 +570,8 @@ class SpatialHash:
             self._allocate_entries(min(MAX_ENTRIES, int(factor * self.entry_capacity) + 1))
         if 1 in counters:
             self._allocate_groups(min(MAX_ENTRIES, int(factor * self.group_capacity) + 1))
+        if 4 in counters:
+            self._allocate_slabs(min(MAX_ENTRIES, int(factor * self.slab_capacity) + 1))
         if 2 in counters:
             self._allocate_rows(min(MAX_ENTRIES, int(factor * self.row_capacity) + 1))
         if 3 in counters:
@@ -591,6 +608,9 @@ class SpatialHash:
             if need > getattr(self, name):
                 allocate(min(limit, int(need * _GROWTH) + 1))
                 fits = False
+        if self._last_slab and int(info[kernels.INFO_GROUPS]) > self.slab_capacity:
+            self._allocate_slabs(min(MAX_ENTRIES, int(int(info[kernels.INFO_GROUPS]) * _GROWTH) + 1))
+            fits = False
         found = int(info[kernels.SUMMARY_PAIRS])
         if found > MAX_PAIRS:
             raise CapacityError(f"spatial hash pair buffer: {found} pairs exceed {MAX_PAIRS}; "
@@ -768,7 +788,9 @@ class SpatialHash:
         wp.launch(kernels._write_tables, dim=n,
                   inputs=[self.entry_key, self.group_rank, self.cell_rank, node_bits, self.info],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
-        wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, g],
+        # A slab-testing call uses the groups only when the slab tables hold them too.
+        live_limit = min(g, self.slab_capacity) if slab.enabled else g
+        wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, live_limit],
                   outputs=[self.info], device=dev)
         if slab.enabled:
             wp.launch(kernels._compute_group_slabs, dim=g,

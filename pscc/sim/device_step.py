@@ -483,7 +483,7 @@ class DeviceStep:
                                    (NEAR_FULL_INTERSECTION, solver.intersection_check.spatial_hash)):
             if report[slot] and spatial_hash is not None:
                 bits = hashes.setdefault(id(spatial_hash), (spatial_hash, set()))[1]
-                bits.update(bit for bit in range(4) if int(report[slot]) >> bit & 1)
+                bits.update(bit for bit in range(5) if int(report[slot]) >> bit & 1)
         for spatial_hash, bits in hashes.values():
             spatial_hash.grow(bits, NEAR_FULL_GROWTH)
             grew = True
@@ -512,7 +512,7 @@ class DeviceStep:
         self._flag_near_full(candidates.counts, 1, candidates.capacity_ee, NEAR_FULL_EDGE_EDGE)
         for k, (count, index, capacity) in enumerate(detector.overflow_counters()):
             self._flag(count, index, capacity, f"broad phase counter {k}")
-            if k < 4 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs
+            if k < 5 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs, slabs
                 self._mark_near_full(count, index, capacity, NEAR_FULL_BROAD_PHASE, k)
 
     def _flag_projection_overflow(self) -> None:
@@ -523,5 +523,5 @@ class DeviceStep:
     def _flag_intersection_overflow(self) -> None:
         for k, (count, index, capacity) in enumerate(self.solver.intersection_check.overflow_counters()):
             self._flag(count, index, capacity, f"intersection check counter {k}")
-            if k < 4 and capacity > 0:
+            if k < 5 and capacity > 0:
                 self._mark_near_full(count, index, capacity, NEAR_FULL_INTERSECTION, k)

@@ -85,3 +85,25 @@ def test_wrong_device_arrays_are_refused_by_name() -> None:
     detector.prepare(mesh.vertices)
     with pytest.raises(Exception, match="positions_t0"):
         detector.detect(wp.array(mesh.vertices[:-1], dtype=wp.vec3, device="cpu"))
+
+
+def test_a_shared_hash_serves_the_detector_and_the_intersection_check() -> None:
+    from pscc.collision.intersection import IntersectionCheck
+
+    mesh = folded_sheet(800, layers=3, seed=4)
+    n = mesh.vertices.shape[0]
+    detector = CollisionDetector(mesh.faces, device="cpu")
+    detector.prepare(mesh.vertices)
+    shared = IntersectionCheck(mesh.faces, n, "cpu", spatial_hash=detector.spatial_hash)
+    own = IntersectionCheck(mesh.faces, n, "cpu")
+    squashed = mesh.vertices_end * np.array([1.0, 1.0, 0.2], np.float32)  # layers pushed through each other
+    crossings = 0
+    for x in (mesh.vertices, mesh.vertices_end, squashed, mesh.vertices_end):
+        expected = CollisionDetector(mesh.faces, device="cpu").detect(x, None, 0.03)
+        _same(detector.detect(x, None, 0.03), expected)
+        found = shared.find(x)
+        np.testing.assert_array_equal(found, own.find(x))
+        crossings += found.shape[0]
+    assert crossings > 0
+    # The check hashes one group per face; the slab tables stay sized by the detector's groups.
+    assert detector.spatial_hash.slab_capacity < detector.spatial_hash.group_capacity
