@@ -1,8 +1,11 @@
 """Count host <-> device traffic from outside, as ``../shared/tools/host_traffic.py`` does.
 
-Reads are ``wp.array.numpy`` / ``wp.array.list``; syncs ``wp.synchronize`` / ``wp.synchronize_device``;
+Reads are ``wp.array.numpy`` / ``wp.array.list``; syncs ``wp.synchronize`` / ``wp.synchronize_device`` /
+``wp.synchronize_stream``;
 uploads ``wp.array.assign``, ``wp.from_numpy`` and ``wp.array(...)`` built from host data. On the CPU
-they cost little; on a GPU every read stalls the device and every upload crosses the bus.
+they cost little; on a GPU every read stalls the device and every upload crosses the bus. The tests
+also count allocations: arrays built without data and without a pointer (``wp.empty``, ``wp.zeros``,
+``wp.full``, ``wp.clone``, ... all come through there; views do not).
 """
 
 from __future__ import annotations
@@ -16,11 +19,12 @@ import warp as wp
 
 @contextlib.contextmanager
 def count_host_traffic() -> Iterator[dict[str, int]]:
-    """Count reads, syncs and uploads made inside the ``with`` block (the dict fills as they happen).
+    """Count ``reads``, ``syncs``, ``uploads`` and ``allocations`` made inside the ``with`` block (the dict
+    fills as they happen).
 
     Not thread-safe: it patches Warp's functions for the duration of the block.
     """
-    counts = {"reads": 0, "syncs": 0, "uploads": 0}
+    counts = {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
     patches: list[tuple[Any, str, Any]] = []
 
     def wrap(owner: Any, name: str, kind: str) -> None:
@@ -37,6 +41,7 @@ def count_host_traffic() -> Iterator[dict[str, int]]:
     wrap(wp.array, "list", "reads")
     wrap(wp, "synchronize", "syncs")
     wrap(wp, "synchronize_device", "syncs")
+    wrap(wp, "synchronize_stream", "syncs")
     wrap(wp.array, "assign", "uploads")
     wrap(wp, "from_numpy", "uploads")
     original_init: Callable[..., None] = wp.array.__init__
@@ -44,6 +49,8 @@ def count_host_traffic() -> Iterator[dict[str, int]]:
     def init(self: wp.array, data: Any = None, *args: Any, **kwargs: Any) -> None:
         if data is not None and not isinstance(data, wp.array | int | float):
             counts["uploads"] += 1
+        elif data is None and kwargs.get("ptr") is None:
+            counts["allocations"] += 1
         original_init(self, data, *args, **kwargs)
 
     wp.array.__init__ = init

@@ -52,7 +52,7 @@ def test_a_recorded_detection_replays_on_new_positions_without_reading_anything(
     detector.detect(x0, x1)  # sizes every buffer
     with count_host_traffic() as counts, wp.ScopedCapture(device=device) as capture:
         contacts = detector.detect(x0, x1)
-    assert counts == {"reads": 0, "syncs": 0, "uploads": 0}
+    assert counts == {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
     # New positions in the same arrays (a later step): the replay must find that step's pairs.
     moved = second.vertices_end + np.float32(0.002) * np.sin(second.vertices * 40.0).astype(np.float32)
     x1.assign(moved)

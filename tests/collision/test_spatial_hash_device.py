@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from pscc.bench.host_traffic import count_host_traffic
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision.intersection import IntersectionCheck
 from pscc.collision.spatial_hash import SpatialHash
@@ -129,38 +130,6 @@ def test_replay_follows_new_array_contents(device: str) -> None:
     assert hash_.stats.triangle_pairs == expected.shape[0]
 
 
-class _HostTraffic:
-    """Counts host reads, synchronizations, uploads and allocations while installed."""
-
-    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
-        self.calls: list[str] = []
-        for name in ("numpy", "list", "assign"):
-            self._wrap(monkeypatch, wp.array, name)
-        for name in ("synchronize", "synchronize_device", "synchronize_stream", "empty", "zeros", "full",
-                     "empty_like", "zeros_like", "clone", "from_numpy"):
-            self._wrap(monkeypatch, wp, name)
-        init = wp.array.__init__
-        calls = self.calls
-
-        def counted_init(array_self, data=None, *args, **kwargs):
-            # An upload (data given) or an allocation (no pointer to view); views pass a pointer.
-            if data is not None or kwargs.get("ptr") is None:
-                calls.append("array.__init__")
-            return init(array_self, data, *args, **kwargs)
-
-        monkeypatch.setattr(wp.array, "__init__", counted_init)
-
-    def _wrap(self, monkeypatch: pytest.MonkeyPatch, owner: Any, name: str) -> None:
-        original = getattr(owner, name)
-        calls = self.calls
-
-        def counted(*args, **kwargs):
-            calls.append(name)
-            return original(*args, **kwargs)
-
-        monkeypatch.setattr(owner, name, counted)
-
-
 def test_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.MonkeyPatch) -> None:
     scene = _scene()
     hashes = []
@@ -172,15 +141,14 @@ def test_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.Monk
     check = IntersectionCheck(mesh.faces, mesh.vertex_count, device)
     positions = wp.array(mesh.vertices_end, dtype=wp.vec3, device=device)
     check.find(positions)
-    traffic = _HostTraffic(monkeypatch)
-    wp.array(np.zeros(2, np.float32), device=device).numpy()  # the counters themselves work
-    assert traffic.calls.count("numpy") == 1 and "array.__init__" in traffic.calls
-    traffic.calls.clear()
-    for hash_, call in hashes:
-        hash_.find_pairs_device(**call)
-    check.count_device(positions, cloth_face_count=scene["m"] // 2)
-    assert traffic.calls == []
-    monkeypatch.undo()
+    with count_host_traffic() as traffic:
+        wp.array(np.zeros(2, np.float32), device=device).numpy()  # the counters themselves work
+    assert traffic["reads"] == 1 and traffic["uploads"] == 1
+    with count_host_traffic() as traffic:
+        for hash_, call in hashes:
+            hash_.find_pairs_device(**call)
+        check.count_device(positions, cloth_face_count=scene["m"] // 2)
+    assert traffic == {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
     assert all(hash_.check_capacity() for hash_, _ in hashes) and check.check_capacity()
 
 

@@ -9,13 +9,10 @@ the springs and then give the same system as a fresh integrator.
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
-from typing import Any
-
 import numpy as np
 import warp as wp
 
+from pscc.bench.host_traffic import count_host_traffic
 from pscc.mesh.generate import grid_sheet
 from pscc.sim import ClothModel, ClothState, ContactSprings, ImplicitEuler, SolverConfig
 from pscc.sim.memory import warp_array_bytes
@@ -180,59 +177,19 @@ def test_a_replayed_step_equals_the_eager_step(device: str) -> None:
             np.testing.assert_allclose(replayed, eager, rtol=1e-5, atol=1e-6 * max(np.abs(eager).max(), 1e-30))
 
 
-@contextlib.contextmanager
-def _count_traffic() -> Iterator[dict[str, int]]:
-    """Count host reads, syncs, uploads and allocations made inside the block."""
-    counts = {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
-    patches: list[tuple[Any, str, Any]] = []
-
-    def wrap(owner: Any, name: str, kind: str) -> None:
-        original = getattr(owner, name)
-
-        def counted(*args: Any, **kwargs: Any) -> Any:
-            counts[kind] += 1
-            return original(*args, **kwargs)
-
-        patches.append((owner, name, original))
-        setattr(owner, name, counted)
-
-    for name in ("numpy", "list"):
-        wrap(wp.array, name, "reads")
-    for name in ("synchronize", "synchronize_device"):
-        wrap(wp, name, "syncs")
-    wrap(wp.array, "assign", "uploads")
-    wrap(wp, "from_numpy", "uploads")
-    for name in ("empty", "zeros", "empty_like", "zeros_like", "clone"):
-        wrap(wp, name, "allocations")
-    original_init = wp.array.__init__
-
-    def init(self: wp.array, data: Any = None, *args: Any, **kwargs: Any) -> None:
-        if data is not None:
-            counts["uploads"] += 1
-        original_init(self, data, *args, **kwargs)
-
-    wp.array.__init__ = init
-    try:
-        yield counts
-    finally:
-        wp.array.__init__ = original_init
-        for owner, name, original in reversed(patches):
-            setattr(owner, name, original)
-
-
 def test_a_steady_state_step_makes_no_host_traffic_and_no_allocation(device: str) -> None:
     model, state = _sheet(device, cells=8)
     integrator = ImplicitEuler(model, _config())
     springs = _springs(device, cells=8)
     out = state.clone()
     integrator.step_device(state, out, DT, contacts=springs)
-    with _count_traffic() as counts:
+    with count_host_traffic() as counts:
         integrator.step_device(out, state, DT, contacts=springs)
         integrator.system.diagonal(integrator._inverse_diagonal)
         integrator.system.apply(state.velocities, out.velocities)
     assert counts == {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
     # The counter does see what the host path does.
-    with _count_traffic() as counts:
+    with count_host_traffic() as counts:
         integrator.step(state, out, DT, contacts=springs)
     assert counts["reads"] > 0
 

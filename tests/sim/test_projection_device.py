@@ -4,13 +4,11 @@ catches an overflow of its constraint buffers."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 import numpy as np
 import pytest
 import warp as wp
 
+from pscc.bench.host_traffic import count_host_traffic
 from pscc.collision.contacts import ContactArgs
 from pscc.sim.inelastic_projection import InelasticProjection
 
@@ -73,37 +71,6 @@ def _bits(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a).view(np.uint32)
 
 
-@contextmanager
-def _host_traffic(monkeypatch: pytest.MonkeyPatch) -> Iterator[dict[str, int]]:
-    """Count host reads, syncs, uploads and allocations made through the Warp API."""
-    counts = {"read": 0, "sync": 0, "upload": 0, "alloc": 0}
-    real_init = wp.array.__init__
-
-    def wrap(name: str, real):
-        def counted(*args, **kwargs):
-            counts[name] += 1
-            return real(*args, **kwargs)
-        return counted
-
-    def init(self, *args, **kwargs):
-        data = kwargs.get("data", args[0] if args else None)
-        if data is not None:
-            counts["upload"] += 1
-        elif kwargs.get("ptr") is None:
-            counts["alloc"] += 1
-        return real_init(self, *args, **kwargs)
-
-    with monkeypatch.context() as patch:
-        patch.setattr(wp.array, "numpy", wrap("read", wp.array.numpy))
-        patch.setattr(wp.array, "list", wrap("read", wp.array.list))
-        patch.setattr(wp.array, "assign", wrap("upload", wp.array.assign))
-        patch.setattr(wp, "synchronize", wrap("sync", wp.synchronize))
-        patch.setattr(wp, "synchronize_device", wrap("sync", wp.synchronize_device))
-        patch.setattr(wp, "empty", wrap("alloc", wp.empty))
-        patch.setattr(wp, "zeros", wrap("alloc", wp.zeros))
-        patch.setattr(wp, "from_numpy", wrap("upload", wp.from_numpy))
-        patch.setattr(wp.array, "__init__", init)
-        yield counts
 
 
 def _device_round(projection: InelasticProjection, contacts: ContactArgs, p0: wp.array, p1: wp.array) -> None:
@@ -224,16 +191,16 @@ def test_the_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.
     projection.reset()
     _device_round(projection, contacts, p0, p1)  # warm-up: modules loaded, launches packed
     assert projection.check_capacity()
-    with _host_traffic(monkeypatch) as counts:
+    with count_host_traffic() as counts:
         projection.reset()
         _device_round(projection, contacts, p0, p1)
         _device_round(projection, contacts, p0, p1)
-    assert counts == {"read": 0, "sync": 0, "upload": 0, "alloc": 0}
+    assert counts == {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}
     # The counters really count: the host API reads and uploads.
-    with _host_traffic(monkeypatch) as counts:
+    with count_host_traffic() as counts:
         projection.add(np.array([[2, 3, 4, 5]]), np.array([0.5]), np.zeros((0, 4)), np.zeros(0), p0, p1)
         projection.solve(p1, SEPARATION, TOLERANCE)
-    assert counts["read"] > 0 and counts["upload"] > 0
+    assert counts["reads"] > 0 and counts["uploads"] > 0
 
 
 def test_an_overflow_is_caught_grown_and_rerun_exactly(device: str) -> None:
