@@ -11,30 +11,10 @@ import warp as wp
 from pscc.bench.host_traffic import count_host_traffic
 from pscc.collision.contacts import ContactArgs
 from pscc.sim.inelastic_projection import InelasticProjection
+from tests.sim.contact_rows import contact_args
 
 SEPARATION = 0.01
 TOLERANCE = 1e-6
-
-
-def _contact_args(device: str, faces: np.ndarray, edges: np.ndarray, vertex_face: np.ndarray,
-                  vertex_face_toi: np.ndarray, edge_edge: np.ndarray, edge_edge_toi: np.ndarray,
-                  spare: int = 3) -> ContactArgs:
-    """A ContactArgs filled by hand. The buffers hold ``spare`` extra rows past the counts, all hits
-    (toi 0) of valid ids: a reader that does not clamp to the counts appends them."""
-    vf = np.concatenate([np.asarray(vertex_face, np.int32).reshape(-1, 2), np.zeros((spare, 2), np.int32)])
-    ee = np.concatenate([np.asarray(edge_edge, np.int32).reshape(-1, 2), np.tile([[0, 1]], (spare, 1))])
-    contacts = ContactArgs()
-    contacts.faces = wp.array(np.asarray(faces, np.int32), dtype=wp.vec3i, device=device)
-    contacts.edges = wp.array(np.asarray(edges, np.int32), dtype=wp.vec2i, device=device)
-    contacts.vertex_face = wp.array(vf, dtype=wp.vec2i, device=device)
-    contacts.edge_edge = wp.array(ee.astype(np.int32), dtype=wp.vec2i, device=device)
-    contacts.vertex_face_toi = wp.array(np.concatenate([vertex_face_toi, np.zeros(spare)]).astype(np.float32),
-                                        dtype=float, device=device)
-    contacts.edge_edge_toi = wp.array(np.concatenate([edge_edge_toi, np.zeros(spare)]).astype(np.float32),
-                                      dtype=float, device=device)
-    contacts.counts = wp.array(np.array([len(vertex_face_toi), len(edge_edge_toi)], np.int32), dtype=wp.int32,
-                               device=device)
-    return contacts
 
 
 def _scene(seed: int, rows: int = 20):
@@ -87,7 +67,7 @@ def test_vertex_face_and_edge_edge_rows_are_projected_like_the_host_path(device:
     x1[4:6, 2] = -0.05
     faces = np.array([[1, 2, 3]])
     edges = np.array([[4, 5], [6, 7], [1, 2]])
-    contacts = _contact_args(device, faces, edges, np.array([[0, 0], [4, 0]]), np.array([0.5, 3.0]),
+    contacts = contact_args(device, faces, edges, np.array([[0, 0], [4, 0]]), np.array([0.5, 3.0]),
                              np.array([[0, 1]]), np.array([0.5]))
     device_path = InelasticProjection(np.ones(8), device)
     p0 = wp.array(x0, dtype=wp.vec3, device=device)
@@ -122,7 +102,7 @@ def test_device_rounds_equal_host_rounds(device: str, seed: int) -> None:
     device_path.reset()
     host_path.reset()
     for vertex_face, vf_toi, edge_edge, ee_toi in rounds:
-        contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+        contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
         _device_round(device_path, contacts, p0, p1)
         assert device_path.check_capacity()
         host_path.add(*_host_rows(faces, edges, vertex_face, vf_toi, edge_edge, ee_toi), p0, q1)
@@ -148,8 +128,8 @@ def test_device_rounds_equal_host_rounds(device: str, seed: int) -> None:
 
 def test_replay_from_a_graph_is_bit_identical_to_the_eager_device_path(device: str) -> None:
     x0, x1, inverse_mass, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi = _scene(5)
-    contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
-    second = _contact_args(device, faces, edges, *_scene(105)[5:])
+    contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+    second = contact_args(device, faces, edges, *_scene(105)[5:])
     projection = InelasticProjection(inverse_mass, device, max_iterations=200, check_every=5)
     p0 = wp.array(x0, dtype=wp.vec3, device=device)
     p1 = wp.array(x1, dtype=wp.vec3, device=device)
@@ -184,7 +164,7 @@ def test_replay_from_a_graph_is_bit_identical_to_the_eager_device_path(device: s
 
 def test_the_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.MonkeyPatch) -> None:
     x0, x1, inverse_mass, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi = _scene(6)
-    contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+    contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
     projection = InelasticProjection(inverse_mass, device, max_iterations=100, check_every=4)
     p0 = wp.array(x0, dtype=wp.vec3, device=device)
     p1 = wp.array(x1, dtype=wp.vec3, device=device)
@@ -218,7 +198,7 @@ def test_an_overflow_is_caught_grown_and_rerun_exactly(device: str) -> None:
     inverse_mass = np.concatenate([np.zeros(len(grid)), np.ones(hits)])  # the grid is an obstacle
     vertex_face = np.stack([len(grid) + np.arange(hits), np.arange(hits)], axis=1)
     toi = np.full(hits, 0.5)
-    contacts = _contact_args(device, faces, np.array([[0, 1]]), vertex_face, toi, np.zeros((0, 2)), np.zeros(0))
+    contacts = contact_args(device, faces, np.array([[0, 1]]), vertex_face, toi, np.zeros((0, 2)), np.zeros(0))
     projection = InelasticProjection(inverse_mass, device)
     assert projection.capacity < hits
     p0 = wp.array(x0, dtype=wp.vec3, device=device)
@@ -247,7 +227,7 @@ def test_an_overflow_is_caught_grown_and_rerun_exactly(device: str) -> None:
 
 def test_nothing_to_project_is_converged_at_once(device: str) -> None:
     x0, x1, inverse_mass, faces, edges, vertex_face, _, edge_edge, _ = _scene(7)
-    misses = _contact_args(device, faces, edges, vertex_face, np.full(len(vertex_face), 2.0), edge_edge,
+    misses = contact_args(device, faces, edges, vertex_face, np.full(len(vertex_face), 2.0), edge_edge,
                            np.full(len(edge_edge), np.inf))
     projection = InelasticProjection(inverse_mass, device)
     p0 = wp.array(x0, dtype=wp.vec3, device=device)

@@ -9,31 +9,10 @@ import pytest
 import warp as wp
 
 from pscc.bench.host_traffic import count_host_traffic
-from pscc.collision.contacts import ContactArgs
 from pscc.sim.proximity import ProximityContacts
+from tests.sim.contact_rows import contact_args
 
 THICKNESS = 0.01
-
-
-def _contact_args(device: str, faces: np.ndarray, edges: np.ndarray, vertex_face: np.ndarray,
-                  vertex_face_toi: np.ndarray, edge_edge: np.ndarray, edge_edge_toi: np.ndarray,
-                  spare: int = 3) -> ContactArgs:
-    """A ContactArgs filled by hand. The buffers hold ``spare`` extra rows past the counts, all hits
-    (toi 0) of valid ids: a reader that does not clamp to the counts appends them."""
-    vf = np.concatenate([np.asarray(vertex_face, np.int32).reshape(-1, 2), np.zeros((spare, 2), np.int32)])
-    ee = np.concatenate([np.asarray(edge_edge, np.int32).reshape(-1, 2), np.tile([[0, 1]], (spare, 1))])
-    contacts = ContactArgs()
-    contacts.faces = wp.array(np.asarray(faces, np.int32), dtype=wp.vec3i, device=device)
-    contacts.edges = wp.array(np.asarray(edges, np.int32), dtype=wp.vec2i, device=device)
-    contacts.vertex_face = wp.array(vf, dtype=wp.vec2i, device=device)
-    contacts.edge_edge = wp.array(ee.astype(np.int32), dtype=wp.vec2i, device=device)
-    contacts.vertex_face_toi = wp.array(np.concatenate([vertex_face_toi, np.zeros(spare)]).astype(np.float32),
-                                        dtype=float, device=device)
-    contacts.edge_edge_toi = wp.array(np.concatenate([edge_edge_toi, np.zeros(spare)]).astype(np.float32),
-                                      dtype=float, device=device)
-    contacts.counts = wp.array(np.array([len(vertex_face_toi), len(edge_edge_toi)], np.int32), dtype=wp.int32,
-                               device=device)
-    return contacts
 
 
 def _scene(seed: int, rows: int = 60):
@@ -82,7 +61,7 @@ def test_vertex_over_a_face_and_crossing_edges_become_springs(device: str) -> No
     kinematic[9:] = True
     faces = np.array([[1, 2, 3], [10, 11, 12]])
     edges = np.array([[4, 5], [6, 7]])
-    contacts = _contact_args(device, faces, edges, np.array([[0, 0], [8, 0], [9, 1]]), np.array([0.0, 2.0, 0.0]),
+    contacts = contact_args(device, faces, edges, np.array([[0, 0], [8, 0], [9, 1]]), np.array([0.0, 2.0, 0.0]),
                              np.array([[0, 1]]), np.array([0.0]))
     proximity = ProximityContacts(faces, kinematic, THICKNESS, device)
     positions = wp.array(x, dtype=wp.vec3, device=device)
@@ -108,7 +87,7 @@ def test_device_springs_equal_host_springs(device: str, seed: int) -> None:
     positions = wp.array(x, dtype=wp.vec3, device=device)
     device_path = ProximityContacts(faces, kinematic, THICKNESS, device)
     device_path.springs.ensure(200)
-    device_path.update_device(_contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi), positions)
+    device_path.update_device(contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi), positions)
     assert device_path.check_capacity()
     host = ProximityContacts(faces, kinematic, THICKNESS, device)
     host.update(*_host_rows(edges, vertex_face, vf_toi, edge_edge, ee_toi), positions)
@@ -125,7 +104,7 @@ def test_device_springs_equal_host_springs(device: str, seed: int) -> None:
 
 def test_replay_from_a_graph_is_bit_identical_to_the_eager_device_path(device: str) -> None:
     x, kinematic, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi = _scene(4)
-    contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+    contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
     proximity = ProximityContacts(faces, kinematic, THICKNESS, device)
     positions = wp.array(x, dtype=wp.vec3, device=device)
     proximity.update_device(contacts, positions)
@@ -150,7 +129,7 @@ def test_replay_from_a_graph_is_bit_identical_to_the_eager_device_path(device: s
 
 def test_the_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.MonkeyPatch) -> None:
     x, kinematic, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi = _scene(5)
-    contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+    contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
     proximity = ProximityContacts(faces, kinematic, THICKNESS, device)
     proximity.springs.ensure(200)
     positions = wp.array(x, dtype=wp.vec3, device=device)
@@ -166,7 +145,7 @@ def test_the_device_path_makes_no_host_traffic(device: str, monkeypatch: pytest.
 
 def test_an_overflow_is_caught_grown_and_rerun_exactly(device: str) -> None:
     x, kinematic, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi = _scene(6, rows=120)
-    contacts = _contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
+    contacts = contact_args(device, faces, edges, vertex_face, vf_toi, edge_edge, ee_toi)
     proximity = ProximityContacts(faces, kinematic, THICKNESS, device)
     springs = proximity.springs
     capacity = springs.capacity
