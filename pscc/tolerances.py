@@ -101,6 +101,17 @@ DEGENERATE_FACE_RATIO: float = 1.0e-10
 normal is noise, so its normal-cone mask is empty and no node containing it is certified.
 Dimensionless."""
 
+CONTACT_NORMAL_MIN_OFFSET: float = 1.0e-12
+"""A contact's closest-point offset shorter than this gives no direction (its float32 components are
+noise); its normal is then the pair's plane normal, oriented like the offset at the start of the step.
+Length units (m in the simulator; 1e-12 m is far below the smallest thickness, so any pair whose
+offset is used is well resolved)."""
+
+CONTACT_NORMAL_MIN_FALLBACK: float = 1.0e-20
+"""A fallback direction (plane normal, start offset) shorter than this is treated as missing, and the
+last resort is +z. Squared-length scale of the products it comes from (cross products of edges);
+only reached by degenerate (collapsed) features."""
+
 MAX_COORDINATE: float = 1.0e9
 """Largest |coordinate| the collision detector accepts, in length units (the units of the positions).
 

@@ -12,7 +12,11 @@ from __future__ import annotations
 
 import warp as wp
 
+from pscc import tolerances
 from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
+
+_MIN_OFFSET = wp.constant(tolerances.CONTACT_NORMAL_MIN_OFFSET)
+_MIN_FALLBACK = wp.constant(tolerances.CONTACT_NORMAL_MIN_FALLBACK)
 
 
 @wp.func
@@ -38,3 +42,22 @@ def pair_plane_normal(x0: wp.vec3, x1: wp.vec3, x2: wp.vec3, x3: wp.vec3, edge_e
     if edge_edge != 0:
         return wp.cross(x1 - x0, x3 - x2)
     return wp.cross(x2 - x1, x3 - x1)
+
+
+@wp.func
+def contact_normal(offset: wp.vec3, fallback: wp.vec3, start_offset: wp.vec3) -> wp.vec3:
+    """Unit contact normal of a pair: its closest-point ``offset`` (see :func:`weighted_sum`), or, when
+    that is shorter than :data:`pscc.tolerances.CONTACT_NORMAL_MIN_OFFSET`, ``fallback`` (the pair's
+    plane normal), else ``start_offset``, else +z, oriented like ``start_offset``."""
+    length = wp.length(offset)
+    if length > _MIN_OFFSET:
+        return offset / length
+    n = fallback
+    if wp.length(n) <= _MIN_FALLBACK:
+        n = start_offset
+    if wp.length(n) <= _MIN_FALLBACK:
+        n = wp.vec3(0.0, 0.0, 1.0)
+    n = wp.normalize(n)
+    if wp.dot(n, start_offset) < 0.0:
+        n = -n
+    return n

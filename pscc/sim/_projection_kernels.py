@@ -14,7 +14,7 @@ from pscc.collision.contacts import (
     vertex_face_hit,
     vertex_face_vertices,
 )
-from pscc.geometry.contact_weights import pair_plane_normal, pair_weights, weighted_sum
+from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
 
 wp.set_module_options({"enable_backward": False})
 
@@ -45,23 +45,6 @@ class ConstraintArgs:
 def _stored(constraints: ConstraintArgs) -> int:
     """Valid constraints: the counter clamped to the capacity."""
     return wp.min(constraints.count[0], constraints.vertices.shape[0])
-
-
-@wp.func
-def _normal_or_fallback(offset: wp.vec3, fallback: wp.vec3, start_offset: wp.vec3) -> wp.vec3:
-    """Unit contact normal: the closest-point offset, else ``fallback`` oriented like the start."""
-    length = wp.length(offset)
-    if length > 1.0e-12:
-        return offset / length
-    n = fallback
-    if wp.length(n) <= 1.0e-20:
-        n = start_offset
-    if wp.length(n) <= 1.0e-20:
-        n = wp.vec3(0.0, 0.0, 1.0)
-    n = wp.normalize(n)
-    if wp.dot(n, start_offset) < 0.0:
-        n = -n
-    return n
 
 
 @wp.kernel
@@ -102,7 +85,7 @@ def _append_constraints(
     start = weighted_sum(w, positions_t0[ids[0]], positions_t0[ids[1]], positions_t0[ids[2]], positions_t0[ids[3]])
     constraints.vertices[slot] = ids
     constraints.weights[slot] = w
-    constraints.normals[slot] = _normal_or_fallback(weighted_sum(w, x0, x1, x2, x3),
+    constraints.normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3),
                                                     pair_plane_normal(x0, x1, x2, x3, edge_edge), start)
     multiplier[slot] = 0.0
     extrapolated[slot] = 0.0

@@ -14,8 +14,9 @@ and asks for a re-run. :meth:`ProximityContacts.update` (host rows) is that devi
 rows.
 
 The normal is the direction between the closest points. A configuration whose closest points
-coincide (distance below 1e-12 m, which the CCD minimum distance keeps from happening) falls back
-to the face normal (vertex-face) or the edges' cross product (edge-edge).
+coincide (distance below :data:`pscc.tolerances.CONTACT_NORMAL_MIN_OFFSET`, which the CCD minimum
+distance keeps from happening) falls back to the face normal (vertex-face) or the edges' cross product
+(edge-edge): :func:`pscc.geometry.contact_weights.contact_normal`, shared with the projection.
 """
 
 from __future__ import annotations
@@ -30,20 +31,10 @@ from pscc.collision.contacts import (
     vertex_face_hit,
     vertex_face_vertices,
 )
-from pscc.geometry.contact_weights import pair_plane_normal, pair_weights, weighted_sum
+from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
 from pscc.sim.contact_springs import ContactSprings
 
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func
-def _unit_or(offset: wp.vec3, fallback: wp.vec3) -> wp.vec3:
-    length = wp.length(offset)
-    if length > 1.0e-12:
-        return offset / length
-    if wp.length(fallback) > 1.0e-20:
-        return wp.normalize(fallback)
-    return wp.vec3(0.0, 0.0, 1.0)
 
 
 @wp.kernel
@@ -85,7 +76,8 @@ def _append_contacts(
     w = pair_weights(x0, x1, x2, x3, edge_edge)
     vertices[slot] = ids
     weights[slot] = w
-    normals[slot] = _unit_or(weighted_sum(w, x0, x1, x2, x3), pair_plane_normal(x0, x1, x2, x3, edge_edge))
+    plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
+    normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
 
 
 class ProximityContacts:
