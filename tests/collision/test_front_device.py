@@ -7,8 +7,9 @@ import pytest
 import warp as wp
 
 from pscc.bench.host_traffic import count_host_traffic
+from pscc.collision._front_kernels import NodeTestArgs, _node_passes
 from pscc.collision.bvh import MaterialBvh
-from pscc.collision.front import NodeTestArgs, NormalConeFront, _node_passes
+from pscc.collision.front import NormalConeFront
 from pscc.errors import InputError
 from pscc.mesh import MeshTopology, folded_sheet, twisted_sheet
 

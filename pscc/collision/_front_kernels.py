@@ -1,0 +1,396 @@
+"""Kernels of :class:`pscc.collision.front.NormalConeFront` (its only user): the node test, the refit,
+shrinking, sprouting and the node ids. The buffers and the algorithm are in that module's docstring.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from pscc.collision.bvh import MaterialBvhArrays
+from pscc.geometry import normal_cone as nc
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class NodeTestArgs:
+    """Everything the node test reads, bundled for the kernels."""
+
+    bvh: MaterialBvhArrays
+    faces: wp.array(dtype=wp.vec3i)
+    positions_t0: wp.array(dtype=wp.vec3)
+    positions_t1: wp.array(dtype=wp.vec3)
+    directions: wp.array(dtype=wp.vec3)
+    direction_table: wp.array(dtype=nc.mask_type)
+    table_resolution: wp.int32
+    node_mask: wp.array(dtype=nc.mask_type)
+    node_normal: wp.array(dtype=wp.vec3)
+    swept: wp.int32
+    margin: wp.float32
+    degenerate_ratio: wp.float32
+
+
+@wp.func
+def _node_passes(args: NodeTestArgs, node: int) -> bool:
+    """PSCC's node test: a leaf, a rigid node, or a patch certified by the normal-cone test."""
+    bvh = args.bvh
+    if bvh.is_leaf[node] == 1 or bvh.is_rigid[node] == 1:
+        return True
+    if bvh.testable[node] == 0:
+        return False
+    m = args.node_mask[node]
+    if nc.mask_is_empty(m):
+        return False
+    axis = nc.pick_axis(m, args.node_normal[node], args.directions)
+    l = args.directions[axis]
+    begin = bvh.contour_offsets[node]
+    end = bvh.contour_offsets[node + 1]
+    reference = bvh.reference_vertex[node]
+    o0 = wp.vec3(0.0, 0.0, 0.0)
+    o1 = wp.vec3(0.0, 0.0, 0.0)
+    if reference >= 0:
+        o0 = args.positions_t0[reference]
+        o1 = args.positions_t1[reference]
+    else:
+        for i in range(begin, end):
+            o0 += args.positions_t0[bvh.contour_vertices[i]]
+            o1 += args.positions_t1[bvh.contour_vertices[i]]
+        scale = 1.0 / float(wp.max(end - begin, 1))
+        o0 = o0 * scale
+        o1 = o1 * scale
+    if args.swept == 1:
+        return nc.contour_test_swept(bvh.contour_vertices, begin, end, args.positions_t0, args.positions_t1,
+                                     o0, o1, l, args.margin)
+    return nc.contour_test(bvh.contour_vertices, begin, end, args.positions_t0, o0, l, args.margin)
+
+
+@wp.kernel
+def _refit_level(
+    # in:
+    args: NodeTestArgs,
+    first_node: int,
+    # out:
+    node_mask: wp.array(dtype=nc.mask_type),
+    node_normal: wp.array(dtype=wp.vec3),
+):
+    """One thread per node of one BVH level (node ids of a level are contiguous)."""
+    node = first_node + wp.tid()
+    bvh = args.bvh
+    empty = nc.mask_type(wp.uint32(0), wp.uint32(0), wp.uint32(0), wp.uint32(0))
+    if bvh.is_rigid[node] == 1:
+        node_mask[node] = empty
+        node_normal[node] = wp.vec3(0.0, 0.0, 0.0)
+        return
+    if bvh.is_leaf[node] == 1:
+        f = args.faces[bvh.face_order[bvh.face_begin[node]]]
+        a0 = args.positions_t0[f[0]]
+        b0 = args.positions_t0[f[1]]
+        c0 = args.positions_t0[f[2]]
+        n = wp.cross(b0 - a0, c0 - a0)
+        if args.swept == 1:
+            a1 = args.positions_t1[f[0]]
+            b1 = args.positions_t1[f[1]]
+            c1 = args.positions_t1[f[2]]
+            n = n + wp.cross(b1 - a1, c1 - a1)
+            node_mask[node] = nc.face_mask_swept_fast(a0, b0, c0, a1, b1, c1, args.direction_table,
+                                                      args.table_resolution, args.directions, args.margin,
+                                                      args.degenerate_ratio)
+        else:
+            node_mask[node] = nc.face_mask_fast(a0, b0, c0, args.direction_table, args.table_resolution,
+                                                args.degenerate_ratio)
+        node_normal[node] = n
+        return
+    left = bvh.left[node]
+    right = bvh.right[node]
+    node_mask[node] = nc.mask_and(node_mask[left], node_mask[right])
+    node_normal[node] = node_normal[left] + node_normal[right]
+
+
+@wp.kernel
+def _begin_update(
+    # in:
+    shrink_interval: wp.int64,
+    # out:
+    calls: wp.array(dtype=wp.int64),
+    counters: wp.array(dtype=wp.int32),
+    shrink_go: wp.array(dtype=wp.int32),
+):
+    """One thread: count the call, clear the per-call counters, and decide whether to shrink."""
+    c = calls[0] + wp.int64(1)
+    calls[0] = c
+    for k in range(4):
+        counters[k] = 0
+    shrink_go[0] = 0
+    if c % shrink_interval == wp.int64(0):
+        shrink_go[0] = 1
+
+
+@wp.kernel
+def _clear_flags(
+    # out:
+    in_front: wp.array(dtype=wp.int32),
+    marked: wp.array(dtype=wp.int32),
+):
+    """One thread per BVH node (N + 1 flags)."""
+    i = wp.tid()
+    in_front[i] = 0
+    marked[i] = 0
+
+
+@wp.kernel
+def _mark_front(
+    # in:
+    front: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+    # out:
+    in_front: wp.array(dtype=wp.int32),
+    marked: wp.array(dtype=wp.int32),
+    lifted: wp.array(dtype=wp.int32),
+):
+    """One thread per front slot (capacity N): flag the front's nodes (``marked`` keeps the flags
+    of the round's start, ``in_front`` is updated by the lifts); thread 0 clears ``lifted``."""
+    i = wp.tid()
+    if i == 0:
+        lifted[0] = 0
+    if i < front_count[0]:
+        in_front[front[i]] = 1
+        marked[front[i]] = 1
+
+
+@wp.kernel
+def _shrink_pairs(
+    # in:
+    args: NodeTestArgs,
+    front: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+    marked: wp.array(dtype=wp.int32),
+    # out:
+    in_front: wp.array(dtype=wp.int32),
+    lifted: wp.array(dtype=wp.int32),
+):
+    """One thread per front slot (capacity N): a left child whose sibling is also in the front
+    lifts both to their parent when the parent passes the test.
+
+    The sibling is looked up in ``marked`` (the front at the round's start), not in ``in_front``:
+    a parent lifted to in this round is not yet a front node for its own sibling, so threads never
+    depend on each other (they write disjoint flags) and every device gives the same front. This
+    is also what a sequential pass in front order gives, as the front always lists a node before
+    the children of its sibling (roots, node order after a shrink, and sprouting keep that).
+    """
+    i = wp.tid()
+    if i >= front_count[0]:
+        return
+    node = front[i]
+    bvh = args.bvh
+    parent = bvh.parent[node]
+    if parent < 0:
+        return
+    if bvh.left[parent] != node:
+        return
+    sibling = bvh.right[parent]
+    if marked[sibling] == 0:
+        return
+    if _node_passes(args, parent):
+        in_front[node] = 0
+        in_front[sibling] = 0
+        in_front[parent] = 1
+        lifted[0] = 1
+
+
+@wp.kernel
+def _finish_shrink_round(
+    # in:
+    lifted: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    node_count: int,
+    # out:
+    front_count: wp.array(dtype=wp.int32),
+    counters: wp.array(dtype=wp.int32),
+):
+    """One thread: after a round that lifted a pair, the front's new size and one more round."""
+    if lifted[0] != 0:
+        front_count[0] = offsets[node_count]
+        counters[2] = counters[2] + 1
+
+
+@wp.kernel
+def _compact_flags(
+    # in:
+    in_front: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    lifted: wp.array(dtype=wp.int32),
+    # out:
+    front_out: wp.array(dtype=wp.int32),
+):
+    """One thread per BVH node: write front nodes in node order (only after a round that lifted)."""
+    node = wp.tid()
+    if lifted[0] == 0:
+        return
+    if in_front[node] == 1:
+        front_out[offsets[node]] = node
+
+
+@wp.kernel
+def _start_sprout(
+    # in:
+    front: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+    # out:
+    frontier: wp.array(dtype=wp.int32),
+    frontier_count: wp.array(dtype=wp.int32),
+    counters: wp.array(dtype=wp.int32),
+):
+    """One thread per front slot (capacity N): the first frontier is the whole front."""
+    i = wp.tid()
+    count = front_count[0]
+    if i == 0:
+        frontier_count[0] = count
+        counters[3] = 0
+    if i < count:
+        frontier[i] = front[i]
+
+
+@wp.kernel
+def _test_frontier(
+    # in:
+    args: NodeTestArgs,
+    frontier: wp.array(dtype=wp.int32),
+    frontier_count: wp.array(dtype=wp.int32),
+    # out:
+    keep: wp.array(dtype=wp.int32),
+    split: wp.array(dtype=wp.int32),
+):
+    """One thread per frontier slot (capacity N + 1): keep the node (passes) or split it into its
+    two children; slots past the frontier get 0, so the scans' last entries are the totals."""
+    i = wp.tid()
+    keep[i] = 0
+    split[i] = 0
+    if i >= frontier_count[0]:
+        return
+    if _node_passes(args, frontier[i]):
+        keep[i] = 1
+    else:
+        split[i] = 2
+
+
+@wp.kernel
+def _scatter_frontier(
+    # in:
+    bvh: MaterialBvhArrays,
+    frontier: wp.array(dtype=wp.int32),
+    frontier_count: wp.array(dtype=wp.int32),
+    keep: wp.array(dtype=wp.int32),
+    keep_offsets: wp.array(dtype=wp.int32),
+    split_offsets: wp.array(dtype=wp.int32),
+    counters: wp.array(dtype=wp.int32),
+    # out:
+    front_out: wp.array(dtype=wp.int32),
+    frontier_out: wp.array(dtype=wp.int32),
+):
+    """One thread per frontier slot (capacity N): append the node to the new front (after the
+    ``counters[3]`` nodes already there), or its children to the next frontier."""
+    i = wp.tid()
+    if i >= frontier_count[0]:
+        return
+    node = frontier[i]
+    if keep[i] == 1:
+        front_out[counters[3] + keep_offsets[i]] = node
+    else:
+        slot = split_offsets[i]
+        frontier_out[slot] = bvh.left[node]
+        frontier_out[slot + 1] = bvh.right[node]
+
+
+@wp.kernel
+def _advance_sprout(
+    # in:
+    keep_offsets: wp.array(dtype=wp.int32),
+    split_offsets: wp.array(dtype=wp.int32),
+    node_count: int,
+    # out:
+    frontier_count: wp.array(dtype=wp.int32),
+    counters: wp.array(dtype=wp.int32),
+):
+    """One thread: account for the level just tested; the next frontier's size ends the loop at 0."""
+    counters[0] = counters[0] + frontier_count[0]
+    counters[1] = counters[1] + 1
+    counters[3] = counters[3] + keep_offsets[node_count]
+    frontier_count[0] = split_offsets[node_count]
+
+
+@wp.kernel
+def _copy_nodes(
+    # in:
+    source: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    # out:
+    target: wp.array(dtype=wp.int32),
+):
+    """One thread per slot (capacity N): copy the first ``count[0]`` node ids."""
+    i = wp.tid()
+    if i < count[0]:
+        target[i] = source[i]
+
+
+@wp.kernel
+def _finish_sprout(
+    # in:
+    front_next: wp.array(dtype=wp.int32),
+    counters: wp.array(dtype=wp.int32),
+    # out:
+    front: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+):
+    """One thread per front slot (capacity N): the new front replaces the old one."""
+    i = wp.tid()
+    count = counters[3]
+    if i == 0:
+        front_count[0] = count
+    if i < count:
+        front[i] = front_next[i]
+
+
+@wp.kernel
+def _write_sort_keys(
+    # in:
+    bvh: MaterialBvhArrays,
+    front: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+    pad_key: int,
+    # out:
+    keys_out: wp.array(dtype=wp.int32),
+    values_out: wp.array(dtype=wp.int32),
+):
+    """One thread per front slot (capacity N): sort key = the node's first face position; slots past
+    the front get ``pad_key`` (larger than every face position), so they sort last."""
+    i = wp.tid()
+    if i < front_count[0]:
+        node = front[i]
+        keys_out[i] = bvh.face_begin[node]
+        values_out[i] = node
+    else:
+        keys_out[i] = pad_key
+        values_out[i] = -1
+
+
+@wp.kernel
+def _assign_node_ids(
+    # in:
+    bvh: MaterialBvhArrays,
+    sorted_begins: wp.array(dtype=wp.int32),
+    sorted_nodes: wp.array(dtype=wp.int32),
+    front_count: wp.array(dtype=wp.int32),
+    # out:
+    node_id_out: wp.array(dtype=wp.int32),
+):
+    """One thread per face position: the last front node starting at or before it owns it."""
+    k = wp.tid()
+    lo = int(0)
+    hi = front_count[0] - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if sorted_begins[mid] <= k:
+            lo = mid
+        else:
+            hi = mid - 1
+    node_id_out[bvh.face_order[k]] = sorted_nodes[lo]
