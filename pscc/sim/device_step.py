@@ -63,7 +63,8 @@ NEAR_FULL_EDGE_EDGE = 17
 NEAR_FULL_PROJECTION = 18
 NEAR_FULL_BROAD_PHASE = 19
 NEAR_FULL_INTERSECTION = 20
-REPORT_SIZE = 21
+PROJECTION_PEAK = 21
+REPORT_SIZE = 22
 
 NEAR_FULL_GROWTH = 1.5
 """Factor a nearly full buffer grows by (see :data:`NEAR_FULL_FRACTION`)."""
@@ -403,6 +404,8 @@ class DeviceStep:
                                                    self._project, report], device=dev)
         wp.capture_while(self._running, lambda: self._response_round(x0, x1))
 
+        wp.launch(_max_counter, dim=1, inputs=[solver.projection.constraint_count, 0, PROJECTION_PEAK],
+                  outputs=[report], device=dev)
         if solver.contact.check_intersections:
             check = solver.intersection_check
             check.count_device(x1, solver.cloth_face_count)

@@ -223,6 +223,17 @@ class InelasticProjection:
         """
         return max(0, min(int(self.constraint_count.numpy()[0]), self.capacity))
 
+    def trim(self, capacity: int) -> None:
+        """Shrink the buffers to ``capacity`` constraints (at least the initial 64) when they are larger,
+        dropping the stored constraints: call between steps only (after :meth:`reset`), and record
+        graphs again (the buffers are new arrays).
+
+        Allocates: when shrinking. Capture-safe: no.
+        """
+        capacity = max(_INITIAL_CAPACITY, int(capacity))
+        if capacity < self.capacity:
+            self._allocate(capacity)
+
     def reserve(self, capacity: int) -> None:
         """Grow the buffers to at least ``capacity`` constraints (1.25 x), keeping the stored ones.
 

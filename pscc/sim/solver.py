@@ -44,6 +44,7 @@ from pscc.sim.device_step import (
     CG_FAILED,
     FLAG_NAMES,
     FLAG_OVERFLOW,
+    PROJECTION_PEAK,
     DeviceStep,
     _velocities_from_positions,
     report_counts,
@@ -60,6 +61,10 @@ from pscc.sim.state import ClothState
 from pscc.tolerances import MAX_COORDINATE
 
 wp.set_module_options({"enable_backward": False})
+
+
+TRIM_FRAMES: int = 8
+"""Device frames in a row that must use under a sixteenth of the projection's buffers before they shrink."""
 
 
 class SimulationError(PsccError):
@@ -194,6 +199,7 @@ class ClothSolver:
         self._device_step: DeviceStep | None = None
         self._frame_graph: tuple[tuple[Any, ...], Any] | None = None
         self._frame_graph_warm: tuple[Any, ...] | None = None
+        self._projection_peaks: list[int] = []
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
@@ -381,7 +387,7 @@ class ClothSolver:
         if report[CG_FAILED] and not failed:
             failed = ["the linear solve overflowed"]
         if not failed:
-            if runner.grow_near_full(report):
+            if runner.grow_near_full(report) | self._trim_projection(int(report[PROJECTION_PEAK])):
                 self._frame_graph = None  # record again, after an eager frame on the new buffers
                 self._frame_graph_warm = None
             self.time = times[-1]
@@ -431,6 +437,21 @@ class ClothSolver:
         counts.update(device_fallbacks=0, graph_recordings=0, graph_replays=0)
         seconds["total"] = time.perf_counter() - started
         return {"steps": steps, "seconds": seconds, "counts": counts}
+
+    def _trim_projection(self, peak: int) -> bool:
+        """Shrink the projection's constraint buffers (to 4 x the recent peak) once the last
+        :data:`TRIM_FRAMES` frames used less than a sixteenth of them: contact peaks at the start of a
+        scene (layers landing) would otherwise hold their memory for the whole run. Returns whether
+        the buffers changed."""
+        self._projection_peaks = (self._projection_peaks + [peak])[-TRIM_FRAMES:]
+        floor = self.cloth_face_count // 4
+        target = max(4 * max(self._projection_peaks), floor)
+        if len(self._projection_peaks) < TRIM_FRAMES or 16 * max(self._projection_peaks) > self.projection.capacity \
+                or target >= self.projection.capacity:
+            return False
+        self.projection.trim(target)
+        self._projection_peaks = []
+        return True
 
     def _device_runner(self) -> DeviceStep:
         if self._device_step is None:

@@ -110,3 +110,15 @@ def test_an_overflowing_candidate_buffer_is_grown_not_truncated() -> None:
     assert _intersection_free(sim)
     later = [sim.step_frame()["counts"]["device_fallbacks"] for _ in range(5)]
     assert later[-1] == 0, later  # grown: the device path runs the frames again
+
+
+def test_projection_buffers_sized_by_a_landing_peak_shrink_once_the_contact_settles() -> None:
+    sim = Simulation(build_scene("stack", 300), device="cpu")
+    capacities = []
+    for _ in range(16):
+        sim.step_frame()
+        capacities.append(sim.solver.projection.capacity)
+        assert _intersection_free(sim)
+    peak = max(capacities)
+    assert capacities[-1] < peak / 4, capacities  # the layers' landing needed many constraints, later ones few
+    assert sim.frame_stats[-1]["counts"]["device_fallbacks"] == 0
