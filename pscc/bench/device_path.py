@@ -24,7 +24,7 @@ from pscc.sim.simulation import Simulation
 
 CASES: list[tuple[str, int, int, int]] = [
     ("drape", 2000, 8, 6), ("stack", 2000, 8, 6), ("twist", 2000, 8, 6),
-    ("drape", 5000, 8, 4), ("stack", 5000, 8, 4), ("twist", 5000, 8, 4),
+    ("drape", 5000, 12, 4), ("stack", 5000, 12, 4), ("twist", 5000, 12, 4),
     ("twisting", 5000, 4, 3),
 ]
 """(scene, cloth triangles, warm-up frames, measured frames); ``twisting`` is the paper scene at its
