@@ -577,6 +577,37 @@ class SpatialHash:
         if 3 in counters:
             self._allocate_pairs(min(MAX_PAIRS, int(factor * self.pair_capacity) + 1))
 
+    def trim(self, capacities: dict[int, int]) -> None:
+        """Shrink the buffers behind the given :meth:`overflow_counters` indices (0 entries, 1 groups,
+        2 rows, 3 pairs, 4 slab tables) to the given capacities where those are smaller (a caller that
+        saw them far from full for a while). Contents are not kept, so call it between calls only, and
+        record graphs again.
+
+        Allocates: when shrinking. Capture-safe: no.
+        """
+        wanted = {k: max(1, int(v)) for k, v in capacities.items()}
+        if 0 in wanted and wanted[0] < self.entry_capacity:
+            # Never more group slots than entries (the entry rank buffers hold the per-group rows): the
+            # groups shrink first, while the old rank buffers still cover them.
+            groups = min(wanted.pop(1, self.group_capacity), wanted[0])
+            if groups < self.group_capacity:
+                self._allocate_groups(groups)
+            self._allocate_entries(wanted[0])
+        if 1 in wanted and wanted[1] < self.group_capacity:
+            self._allocate_groups(wanted[1])
+        if 2 in wanted and wanted[2] < self.row_capacity:
+            self._allocate_rows(wanted[2])
+        if 3 in wanted and wanted[3] < self.pair_capacity:
+            self._allocate_pairs(wanted[3])
+        if 4 in wanted and wanted[4] < self.slab_capacity:
+            self._allocate_slabs(wanted[4])
+
+    def capacities(self) -> dict[int, int]:
+        """The capacities behind :meth:`overflow_counters` indices 0 to 4 (entries, groups, rows, pairs,
+        slab tables)."""
+        return {0: self.entry_capacity, 1: self.group_capacity, 2: self.row_capacity, 3: self.pair_capacity,
+                4: self.slab_capacity}
+
     def check_capacity(self) -> bool:
         """Sync point: read the counters of the last device call (one copy), raise its deferred input
         errors, grow every buffer that overflowed (1.25 x the exact need) and fill :attr:`stats`.

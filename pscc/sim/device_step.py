@@ -64,7 +64,8 @@ NEAR_FULL_PROJECTION = 18
 NEAR_FULL_BROAD_PHASE = 19
 NEAR_FULL_INTERSECTION = 20
 PROJECTION_PEAK = 21
-REPORT_SIZE = 22
+HASH_PEAKS = 22  # 5 slots: the largest entries, groups, rows, pairs and slab-tested groups of the frame
+REPORT_SIZE = 27
 
 NEAR_FULL_GROWTH = 1.5
 """Factor a nearly full buffer grows by (see :data:`NEAR_FULL_FRACTION`)."""
@@ -221,6 +222,20 @@ def _mark_if_near_full(
     """One thread: set bit ``bit`` of report[slot] when count[index] exceeds ``limit``."""
     if count[index] > limit:
         report[slot] = report[slot] | (1 << bit)
+
+
+@wp.kernel
+def _max_counter_int64(
+    # in:
+    source: wp.array(dtype=wp.int64),
+    source_index: int,
+    slot: int,
+    # out:
+    report: wp.array(dtype=wp.int32),
+):
+    """One thread: report[slot] = max(report[slot], source[source_index]) (clamped to int32)."""
+    value = wp.min(source[source_index], wp.int64(2147483647))
+    report[slot] = wp.max(report[slot], wp.int32(value))
 
 
 @wp.kernel
@@ -464,6 +479,12 @@ class DeviceStep:
         wp.launch(_flag_if_near_full, dim=1, inputs=[count, index, int(NEAR_FULL_FRACTION * capacity), slot],
                   outputs=[self.report], device=self.device)
 
+    def _track_hash_peak(self, count: wp.array, index: int, capacity: int, k: int) -> None:
+        if k == 4 and capacity >= 2**30 - 1:  # not a slab-testing call: its groups are not slab groups
+            return
+        wp.launch(_max_counter_int64, dim=1, inputs=[count, index, HASH_PEAKS + k], outputs=[self.report],
+                  device=self.device)
+
     def _mark_near_full(self, count: wp.array, index: int, capacity: int, slot: int, bit: int) -> None:
         wp.launch(_mark_if_near_full, dim=1, inputs=[count, index, int(NEAR_FULL_FRACTION * capacity), slot, bit],
                   outputs=[self.report], device=self.device)
@@ -517,6 +538,7 @@ class DeviceStep:
             self._flag(count, index, capacity, f"broad phase counter {k}")
             if k < 5 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs, slabs
                 self._mark_near_full(count, index, capacity, NEAR_FULL_BROAD_PHASE, k)
+                self._track_hash_peak(count, index, capacity, k)
 
     def _flag_projection_overflow(self) -> None:
         projection = self.solver.projection
@@ -528,3 +550,4 @@ class DeviceStep:
             self._flag(count, index, capacity, f"intersection check counter {k}")
             if k < 5 and capacity > 0:
                 self._mark_near_full(count, index, capacity, NEAR_FULL_INTERSECTION, k)
+                self._track_hash_peak(count, index, capacity, k)

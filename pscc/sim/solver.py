@@ -44,6 +44,7 @@ from pscc.sim.device_step import (
     CG_FAILED,
     FLAG_NAMES,
     FLAG_OVERFLOW,
+    HASH_PEAKS,
     PROJECTION_PEAK,
     DeviceStep,
     _velocities_from_positions,
@@ -64,7 +65,11 @@ wp.set_module_options({"enable_backward": False})
 
 
 TRIM_FRAMES: int = 8
-"""Device frames in a row that must use under a sixteenth of the projection's buffers before they shrink."""
+"""Device frames in a row that must leave the projection's buffers (under a sixteenth used) or the hash
+tables (under two thirds used) mostly empty before they shrink."""
+
+TRIM_SLACK: int = 1024
+"""Slots a hash table keeps beyond its trim rule (small tables are never trimmed)."""
 
 
 class SimulationError(PsccError):
@@ -200,6 +205,7 @@ class ClothSolver:
         self._frame_graph: tuple[tuple[Any, ...], Any] | None = None
         self._frame_graph_warm: tuple[Any, ...] | None = None
         self._projection_peaks: list[int] = []
+        self._hash_peaks: list[list[int]] = []
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
@@ -387,7 +393,8 @@ class ClothSolver:
         if report[CG_FAILED] and not failed:
             failed = ["the linear solve overflowed"]
         if not failed:
-            if runner.grow_near_full(report) | self._trim_projection(int(report[PROJECTION_PEAK])):
+            if runner.grow_near_full(report) | self._trim_projection(int(report[PROJECTION_PEAK])) \
+                    | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]]):
                 self._frame_graph = None  # record again, after an eager frame on the new buffers
                 self._frame_graph_warm = None
             self.time = times[-1]
@@ -451,6 +458,26 @@ class ClothSolver:
             return False
         self.projection.trim(target)
         self._projection_peaks = []
+        return True
+
+    def _trim_hash(self, peaks: list[int]) -> bool:
+        """Shrink the hash tables (to 1.25 x the recent peak) once the last :data:`TRIM_FRAMES` frames used
+        less than two thirds of them: growth ahead of need while contact builds up leaves slack that the
+        settled contact does not use. Returns whether the buffers changed."""
+        spatial_hash = self.intersection_check.spatial_hash  # the detector's, when it hashes
+        self._hash_peaks = (self._hash_peaks + [peaks])[-TRIM_FRAMES:]
+        if len(self._hash_peaks) < TRIM_FRAMES:
+            return False
+        capacities = spatial_hash.capacities()
+        targets = {}
+        for k in range(5):
+            peak = max(frame[k] for frame in self._hash_peaks)
+            if capacities[k] > 1.5 * peak + TRIM_SLACK:
+                targets[k] = int(1.25 * peak) + TRIM_SLACK // 2
+        if not targets:
+            return False
+        spatial_hash.trim(targets)
+        self._hash_peaks = []
         return True
 
     def _device_runner(self) -> DeviceStep:

@@ -107,3 +107,16 @@ def test_a_shared_hash_serves_the_detector_and_the_intersection_check() -> None:
     assert crossings > 0
     # The check hashes one group per face; the slab tables stay sized by the detector's groups.
     assert detector.spatial_hash.slab_capacity < detector.spatial_hash.group_capacity
+
+
+def test_trimmed_hash_tables_still_give_every_pair() -> None:
+    mesh = folded_sheet(800, layers=3, seed=5)
+    detector = CollisionDetector(mesh.faces, device="cpu")
+    expected = CollisionDetector(mesh.faces, device="cpu").detect(mesh.vertices, mesh.vertices_end)
+    _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
+    spatial_hash = detector.spatial_hash
+    before = spatial_hash.capacities()
+    spatial_hash.trim({k: 8 for k in range(5)})  # far below the need: the next call must grow them again
+    assert all(capacity <= 8 for capacity in spatial_hash.capacities().values())
+    _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
+    assert spatial_hash.capacities()[0] >= min(before[0], spatial_hash.stats.entries)
