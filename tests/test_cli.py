@@ -125,7 +125,7 @@ def test_simulate_writes_frames_and_stats(tmp_path: Path, capsys) -> None:
         assert frame["obstacle_faces"].max() < frame["obstacle_vertices"].shape[0]
         assert np.all(np.isfinite(frame["vertices"]))
     stats = json.loads((out / "stats.json").read_text())
-    assert stats["scene"] == "drape" and len(stats["frames"]) == 2
+    assert stats["scene"] == "drape" and len(stats["frames"]) == 2 and stats["graph"] == "replayed"
     for record in stats["frames"]:
         assert record["seconds"]["total"] > 0.0
         if record["counts"]["device_fallbacks"]:  # the host path times its stages

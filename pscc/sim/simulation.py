@@ -241,12 +241,15 @@ class Simulation:
                            "pass --overwrite to start it again")
 
     def summary(self) -> dict[str, Any]:
-        """Scene, device, sizes and the per-frame stats."""
+        """Scene, device, graph use (``off``, ``replayed`` or why it is unavailable), sizes and the
+        per-frame stats."""
         solver = self.solver
         return {
             "scene": self.scene.name,
             "description": self.scene.description,
             "device": str(solver.device),
+            "graph": "off" if not self.graph else ("replayed" if solver.graph_unavailable is None
+                                                   else f"unavailable: {solver.graph_unavailable}"),
             "cloth_vertices": int(self.scene.vertices.shape[0]),
             "cloth_triangles": int(self.scene.faces.shape[0]),
             "obstacle_triangles": int(sum(o.faces.shape[0] for o in self.scene.obstacles)),

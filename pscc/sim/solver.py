@@ -206,6 +206,9 @@ class ClothSolver:
         self._frame_graph_warm: tuple[Any, ...] | None = None
         self._projection_peaks: list[int] = []
         self._hash_peaks: list[list[int]] = []
+        self.graph_unavailable: str | None = None
+        """Why frames cannot be recorded into a graph on this device (``None``: they can); the frames then
+        run eagerly, with the same results."""
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
@@ -494,9 +497,16 @@ class ClothSolver:
         if graph and self._frame_graph is not None and self._frame_graph[0] == key:
             wp.capture_launch(self._frame_graph[1])
             return "replayed"
-        if graph and self._frame_graph_warm == key:
-            with wp.ScopedCapture(device=self.device) as capture:
+        if graph and self._frame_graph_warm == key and self.graph_unavailable is None:
+            try:
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._launch_frame(runner, state, scratch, dt, steps)
+            except RuntimeError as error:
+                # E.g. a CUDA driver without conditional graph nodes (CUDA < 12.4): the frame is
+                # recorded with device-side loops, which that driver cannot replay. Run eagerly.
+                self.graph_unavailable = f"{type(error).__name__}: {error}"
                 self._launch_frame(runner, state, scratch, dt, steps)
+                return "eager"
             self._frame_graph = (key, capture.graph)
             wp.capture_launch(capture.graph)
             return "recorded"

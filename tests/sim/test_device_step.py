@@ -122,3 +122,23 @@ def test_projection_buffers_sized_by_a_landing_peak_shrink_once_the_contact_sett
     peak = max(capacities)
     assert capacities[-1] < peak / 4, capacities  # the layers' landing needed many constraints, later ones few
     assert sim.frame_stats[-1]["counts"]["device_fallbacks"] == 0
+
+
+def test_a_device_that_cannot_record_the_frame_runs_it_eagerly(monkeypatch: pytest.MonkeyPatch) -> None:
+    class Refused:
+        def __init__(self, *args: object, **kwargs: object) -> None:
+            pass
+
+        def __enter__(self) -> None:
+            raise RuntimeError("conditional graph nodes need CUDA 12.4 (simulated)")
+
+        def __exit__(self, *args: object) -> None:
+            return None
+
+    _, eager = _frames("twist", 200, 5, graph=False)
+    monkeypatch.setattr(wp, "ScopedCapture", Refused)
+    sim, refused = _frames("twist", 200, 5, graph=True)
+    assert "12.4" in sim.solver.graph_unavailable
+    assert all(f["counts"]["graph_replays"] + f["counts"]["graph_recordings"] == 0 for f in sim.frame_stats)
+    for a, b in zip(refused, eager, strict=True):
+        np.testing.assert_array_equal(a, b)
