@@ -501,7 +501,7 @@ class ClothSolver:
             try:
                 with wp.ScopedCapture(device=self.device) as capture:
                     self._launch_frame(runner, state, scratch, dt, steps)
-            except RuntimeError as error:
+            except Exception as error:  # noqa: BLE001 - any refusal to record: the eager frame runs instead
                 # E.g. a CUDA driver without conditional graph nodes (CUDA < 12.4): the frame is
                 # recorded with device-side loops, which that driver cannot replay. Run eagerly.
                 self.graph_unavailable = f"{type(error).__name__}: {error}"
