@@ -183,103 +183,55 @@ def _add_counter(
 @wp.kernel
 def _max_counter(
     # in:
-    source: wp.array(dtype=wp.int32),
+    source: wp.array(dtype=Any),
     source_index: int,
     slot: int,
     # out:
     report: wp.array(dtype=wp.int32),
 ):
-    """One thread: report[slot] = max(report[slot], source[source_index])."""
-    report[slot] = wp.max(report[slot], source[source_index])
-
-
-@wp.kernel
-def _flag_if_near_full(
-    # in:
-    count: wp.array(dtype=wp.int32),
-    index: int,
-    limit: int,
-    slot: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: raise flag ``slot`` when count[index] exceeds ``limit`` (a fraction of the capacity)."""
-    if count[index] > limit:
-        report[slot] = 1
-
-
-@wp.kernel
-def _mark_if_near_full(
-    # in:
-    count: wp.array(dtype=wp.int64),
-    index: int,
-    limit: wp.int64,
-    slot: int,
-    bit: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: set bit ``bit`` of report[slot] when count[index] exceeds ``limit``."""
-    if count[index] > limit:
-        report[slot] = report[slot] | (1 << bit)
-
-
-@wp.kernel
-def _max_counter_int64(
-    # in:
-    source: wp.array(dtype=wp.int64),
-    source_index: int,
-    slot: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: report[slot] = max(report[slot], source[source_index]) (clamped to int32)."""
-    value = wp.min(source[source_index], wp.int64(2147483647))
+    """One thread: report[slot] = max(report[slot], source[source_index]) (an int32 or int64 counter,
+    clamped to int32)."""
+    value = wp.min(wp.int64(source[source_index]), wp.int64(2147483647))
     report[slot] = wp.max(report[slot], wp.int32(value))
 
 
 @wp.kernel
-def _flag_if_positive(
+def _mark_if_above(
     # in:
-    source: wp.array(dtype=wp.int32),
-    slot: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: raise flag ``slot`` when source[0] > 0."""
-    if source[0] > 0:
-        report[slot] = 1
-
-
-@wp.kernel
-def _flag_if_above_int32(
-    # in:
-    count: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=Any),
     index: int,
-    capacity: int,
-    code: int,
+    limit: wp.int64,
+    slot: int,
+    mask: int,
     # out:
     report: wp.array(dtype=wp.int32),
 ):
-    """One thread: set FLAG_OVERFLOW to ``code`` when count[index] exceeds ``capacity`` (or wrapped negative)."""
-    c = count[index]
-    if (c > capacity or c < 0) and report[FLAG_OVERFLOW] == 0:  # the first overflow is the cause
-        report[FLAG_OVERFLOW] = code
+    """One thread: set the bits ``mask`` of report[slot] when count[index] (int32 or int64) exceeds ``limit``."""
+    if wp.int64(count[index]) > limit:
+        report[slot] = report[slot] | mask
 
 
 @wp.kernel
-def _flag_if_above_int64(
+def _flag_if_above(
     # in:
-    count: wp.array(dtype=wp.int64),
+    count: wp.array(dtype=Any),
     index: int,
     capacity: wp.int64,
     code: int,
     # out:
     report: wp.array(dtype=wp.int32),
 ):
-    """One thread: set FLAG_OVERFLOW to ``code`` when count[index] exceeds ``capacity``."""
-    if (count[index] > capacity or count[index] < wp.int64(0)) and report[FLAG_OVERFLOW] == 0:
+    """One thread: set FLAG_OVERFLOW to ``code`` when count[index] (int32 or int64) exceeds ``capacity`` or
+    wrapped negative, unless an earlier overflow is already recorded (the first one is the cause)."""
+    c = wp.int64(count[index])
+    if (c > capacity or c < wp.int64(0)) and report[FLAG_OVERFLOW] == 0:
         report[FLAG_OVERFLOW] = code
+
+
+# Explicit overloads: the CUDA ahead-of-time compile sees both counter types.
+for _kernel in (_max_counter, _mark_if_above, _flag_if_above):
+    for _dtype in (wp.int32, wp.int64):
+        wp.overload(_kernel, {"count" if _kernel is not _max_counter else "source": wp.array(dtype=_dtype)})
 
 
 @wp.kernel
@@ -311,8 +263,7 @@ def flag_overflow(count: wp.array, index: int, capacity: int, report: wp.array, 
 
     Allocates: no. Capture-safe: yes.
     """
-    kernel = _flag_if_above_int64 if count.dtype == wp.int64 else _flag_if_above_int32
-    wp.launch(kernel, dim=1, inputs=[count, int(index), int(capacity), int(code)], outputs=[report],
+    wp.launch(_flag_if_above, dim=1, inputs=[count, int(index), wp.int64(int(capacity)), int(code)], outputs=[report],
               device=report.device)
 
 
@@ -425,8 +376,8 @@ class DeviceStep:
             check = solver.intersection_check
             check.count_device(x1, solver.cloth_face_count)
             self._flag_intersection_overflow()
-            wp.launch(_flag_if_positive, dim=1, inputs=[check.crossing_count, FLAG_CROSSINGS], outputs=[report],
-                      device=dev)
+            wp.launch(_mark_if_above, dim=1, inputs=[check.crossing_count, 0, wp.int64(0), FLAG_CROSSINGS, 1],
+                      outputs=[report], device=dev)
 
         wp.launch(_velocities_from_positions, dim=vertex_count, inputs=[x0, x1, 1.0 / dt],
                   outputs=[state_out.velocities], device=dev)
@@ -435,7 +386,7 @@ class DeviceStep:
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 1, DCD_EDGE_EDGE], outputs=[report], device=dev)
         solver.proximity.update_device(contacts.args, x1)
         self._flag(springs.count, 0, springs.capacity, "contact springs")
-        self._flag_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
+        self._mark_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
         wp.launch(_max_counter, dim=1, inputs=[springs.count, 0, CONTACTS], outputs=[report], device=dev)
         front_count = detector.front_count()
         if front_count is not None:
@@ -475,19 +426,17 @@ class DeviceStep:
         """The buffer an overflow code of the report names."""
         return self._overflow_names[code - 1] if 1 <= code <= len(self._overflow_names) else f"code {code}"
 
-    def _flag_near_full(self, count: wp.array, index: int, capacity: int, slot: int) -> None:
-        wp.launch(_flag_if_near_full, dim=1, inputs=[count, index, int(NEAR_FULL_FRACTION * capacity), slot],
-                  outputs=[self.report], device=self.device)
-
     def _track_hash_peak(self, count: wp.array, index: int, capacity: int, k: int) -> None:
         if k == 4 and capacity >= 2**30 - 1:  # not a slab-testing call: its groups are not slab groups
             return
-        wp.launch(_max_counter_int64, dim=1, inputs=[count, index, HASH_PEAKS + k], outputs=[self.report],
+        wp.launch(_max_counter, dim=1, inputs=[count, index, HASH_PEAKS + k], outputs=[self.report],
                   device=self.device)
 
-    def _mark_near_full(self, count: wp.array, index: int, capacity: int, slot: int, bit: int) -> None:
-        wp.launch(_mark_if_near_full, dim=1, inputs=[count, index, int(NEAR_FULL_FRACTION * capacity), slot, bit],
-                  outputs=[self.report], device=self.device)
+    def _mark_near_full(self, count: wp.array, index: int, capacity: int, slot: int, bit: int = 0) -> None:
+        """Set bit ``bit`` of report[slot] when the counter passes :data:`NEAR_FULL_FRACTION` of ``capacity``."""
+        limit = wp.int64(int(NEAR_FULL_FRACTION * capacity))
+        wp.launch(_mark_if_above, dim=1, inputs=[count, index, limit, slot, 1 << bit], outputs=[self.report],
+                  device=self.device)
 
     def grow_near_full(self, report: np.ndarray) -> bool:
         """After a frame that fit: grow the buffers its report marks as nearly full.
@@ -532,8 +481,8 @@ class DeviceStep:
         candidates = detector.candidates
         self._flag(candidates.counts, 0, candidates.capacity_vf, "vertex-face candidates")
         self._flag(candidates.counts, 1, candidates.capacity_ee, "edge-edge candidates")
-        self._flag_near_full(candidates.counts, 0, candidates.capacity_vf, NEAR_FULL_VERTEX_FACE)
-        self._flag_near_full(candidates.counts, 1, candidates.capacity_ee, NEAR_FULL_EDGE_EDGE)
+        self._mark_near_full(candidates.counts, 0, candidates.capacity_vf, NEAR_FULL_VERTEX_FACE)
+        self._mark_near_full(candidates.counts, 1, candidates.capacity_ee, NEAR_FULL_EDGE_EDGE)
         for k, (count, index, capacity) in enumerate(detector.overflow_counters()):
             self._flag(count, index, capacity, f"broad phase counter {k}")
             if k < 5 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs, slabs
@@ -543,7 +492,7 @@ class DeviceStep:
     def _flag_projection_overflow(self) -> None:
         projection = self.solver.projection
         self._flag(projection.constraint_count, 0, projection.capacity, "projection constraints")
-        self._flag_near_full(projection.constraint_count, 0, projection.capacity, NEAR_FULL_PROJECTION)
+        self._mark_near_full(projection.constraint_count, 0, projection.capacity, NEAR_FULL_PROJECTION)
 
     def _flag_intersection_overflow(self) -> None:
         for k, (count, index, capacity) in enumerate(self.solver.intersection_check.overflow_counters()):

@@ -279,7 +279,6 @@ def test_intersection_count_device(device: str, monkeypatch: pytest.MonkeyPatch)
     small.count_device(points, cloth_faces)
     runs = 1
     while not small.check_capacity():
-        assert small.hit_count.numpy()[0] >= 0
         small.count_device(points, cloth_faces)
         runs += 1
     assert runs >= 2 and small.hit_capacity >= hits.shape[0]
