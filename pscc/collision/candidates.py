@@ -123,6 +123,18 @@ class CandidatePairs:
         if capacity_ee > self.capacity_ee:
             self.edge_edge = self._grown(capacity_ee, "edge_edge")
 
+    def trim(self, capacity_vf: int, capacity_ee: int) -> None:
+        """Shrink the buffers (contents are not kept) that are larger than the given numbers of pairs (at
+        least one slot each): between broad phases only; the narrow phase's buffers follow with
+        :meth:`pscc.collision.narrow_phase.NarrowPhase.reserve`, and recorded graphs must be recorded again.
+
+        Allocates: only when a buffer shrinks. Capture-safe: no.
+        """
+        if 0 < capacity_vf < self.capacity_vf:
+            self.vertex_face = wp.empty(int(capacity_vf), dtype=wp.vec2i, device=self.device)
+        if 0 < capacity_ee < self.capacity_ee:
+            self.edge_edge = wp.empty(int(capacity_ee), dtype=wp.vec2i, device=self.device)
+
     @property
     def vertex_face_count(self) -> int:
         """Vertex-face pairs found by the last run, as read by the last :meth:`fits` (host value)."""

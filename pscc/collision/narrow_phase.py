@@ -292,15 +292,15 @@ class NarrowPhase:
                 + self.hit_counts.capacity)
 
     def reserve(self, candidates: CandidatePairs) -> None:
-        """Grow the time-of-impact buffers to at least the candidates' capacities (contents not kept).
+        """Size the time-of-impact buffers to the candidates' capacities (contents not kept).
 
-        Reads nothing from the device; call it after :meth:`CandidatePairs.fits` (which may grow the
-        candidates) and before :meth:`run_device`.
-        Allocates: only when the candidate buffers grew. Capture-safe: no.
+        Reads nothing from the device; call it after :meth:`CandidatePairs.fits` or
+        :meth:`CandidatePairs.trim` (which may resize the candidates) and before :meth:`run_device`.
+        Allocates: only when the candidate buffers were resized. Capture-safe: no.
         """
-        if self.vertex_face_toi.shape[0] < candidates.capacity_vf:
+        if self.vertex_face_toi.shape[0] != candidates.capacity_vf:
             self.vertex_face_toi = wp.empty(candidates.capacity_vf, dtype=wp.float32, device=self.device)
-        if self.edge_edge_toi.shape[0] < candidates.capacity_ee:
+        if self.edge_edge_toi.shape[0] != candidates.capacity_ee:
             self.edge_edge_toi = wp.empty(candidates.capacity_ee, dtype=wp.float32, device=self.device)
 
     def mark_moved(self, old_t0: wp.array, new_t0: wp.array, old_t1: wp.array, new_t1: wp.array) -> wp.array:

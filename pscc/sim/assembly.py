@@ -491,8 +491,9 @@ class ImplicitSystem:
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
 
     def reserve_contacts(self, capacity: int) -> None:
-        """Make room for ``capacity`` contact coefficients. Allocates: only when growing. Capture-safe: no."""
-        if capacity > self.contact_coefficients.shape[0]:
+        """Size the contact coefficients for ``capacity`` contacts (the springs' capacity, which grows and
+        shrinks). Allocates: only when the capacity changes. Capture-safe: no."""
+        if capacity != self.contact_coefficients.shape[0]:
             self.contact_coefficients = wp.zeros(int(capacity), dtype=wp.vec2, device=self.device)
 
     def assemble(self, positions: wp.array, velocities: wp.array, targets: wp.array, params: StepParams,

@@ -129,9 +129,22 @@ class ContactSprings:
             raise CapacityError(f"contact springs: {capacity} contacts exceed {MAX_CAPACITY}; "
                                 "reduce the thickness or split the scene")
         size = min(MAX_CAPACITY, int(capacity * 1.25) + 256)
-        self.vertices = self._grown(self.vertices, size)
-        self.weights = self._grown(self.weights, size)
-        self.normals = self._grown(self.normals, size)
+        self.vertices = self._resized(self.vertices, size)
+        self.weights = self._resized(self.weights, size)
+        self.normals = self._resized(self.normals, size)
+
+    def trim(self, capacity: int) -> None:
+        """Shrink the buffers to ``capacity`` slots (at least 256) when they are larger, keeping the
+        contacts stored below it: call between steps with ``capacity`` at least the stored count, and
+        record graphs again (the buffers are new arrays).
+
+        Allocates: when shrinking. Capture-safe: no.
+        """
+        size = max(256, int(capacity))
+        if size < self.capacity:
+            self.vertices = self._resized(self.vertices, size)
+            self.weights = self._resized(self.weights, size)
+            self.normals = self._resized(self.normals, size)
 
     def set(self, vertices: Any, weights: Any, normals: Any) -> None:
         """Replace the contacts with host data (grows the buffers as needed).
@@ -174,7 +187,7 @@ class ContactSprings:
             self.normals.assign(np.concatenate([unit, np.zeros((self.capacity - k, 3), np.float32)]))
         self.set_count(k)
 
-    def _grown(self, old: wp.array, size: int) -> wp.array:
+    def _resized(self, old: wp.array, size: int) -> wp.array:
         new = wp.zeros(size, dtype=old.dtype, device=self.device)
-        wp.copy(new, old, count=old.shape[0])
+        wp.copy(new, old, count=min(size, old.shape[0]))
         return new

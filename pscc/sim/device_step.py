@@ -65,7 +65,8 @@ NEAR_FULL_BROAD_PHASE = 19
 NEAR_FULL_INTERSECTION = 20
 PROJECTION_PEAK = 21
 HASH_PEAKS = 22  # 5 slots: the largest entries, groups, rows, pairs and slab-tested groups of the frame
-REPORT_SIZE = 27
+CANDIDATE_PEAKS = 27  # 2 slots: the most vertex-face and edge-edge candidates of a broad phase in the frame
+REPORT_SIZE = 29
 
 NEAR_FULL_GROWTH = 1.5
 """Factor a nearly full buffer grows by (see :data:`NEAR_FULL_FRACTION`)."""
@@ -291,6 +292,13 @@ class DeviceStep:
 
     # ------------------------------------------------------------------ frame-level (host) helpers
 
+    def device_bytes(self) -> int:
+        """Bytes of this object's device arrays: the report, the loop flags, the targets table and the
+        frame-start copies of :meth:`save` (the host staging array is not device memory)."""
+        arrays = [self.report, self._control, self._running, self._need_broad_phase, self._project, self._targets,
+                  *(copy for _, copy in self._saved)]
+        return sum(int(a.capacity) for a in arrays if a is not None)
+
     def upload_targets(self, targets: np.ndarray) -> None:
         """Copy the handle targets of a frame's steps, (steps, handle_count, 3), to the device table.
 
@@ -319,15 +327,13 @@ class DeviceStep:
         return self.report.numpy().astype(np.int64)
 
     def _saved_arrays(self, state: Any) -> list[wp.array]:
-        solver = self.solver
-        springs = solver.proximity.springs
-        return [state.positions, state.velocities, solver.integrator.dv, springs.vertices, springs.weights,
-                springs.normals, springs.count]
+        return [state.positions, state.velocities, self.solver.integrator.dv]
 
     def save(self, state: Any) -> None:
-        """Device copies of everything the frame changes that a re-run needs: positions, velocities,
-        the CG warm start and the contact springs. Allocates: when a buffer's shape changed.
-        Capture-safe: yes once allocated."""
+        """Device copies of what the frame changes that a re-run needs and cannot recompute: positions,
+        velocities and the CG warm start (the contact springs are a function of the positions:
+        :meth:`pscc.sim.ClothSolver.advance_frame` rebuilds them after :meth:`restore`). Allocates: when
+        a buffer's shape changed. Capture-safe: yes once allocated."""
         arrays = self._saved_arrays(state)
         if len(self._saved) != len(arrays) or any(copy.shape != a.shape or copy.dtype != a.dtype or src is not a
                                                   for (src, copy), a in zip(self._saved, arrays, strict=True)):
@@ -483,6 +489,9 @@ class DeviceStep:
         self._flag(candidates.counts, 1, candidates.capacity_ee, "edge-edge candidates")
         self._mark_near_full(candidates.counts, 0, candidates.capacity_vf, NEAR_FULL_VERTEX_FACE)
         self._mark_near_full(candidates.counts, 1, candidates.capacity_ee, NEAR_FULL_EDGE_EDGE)
+        for k in range(2):
+            wp.launch(_max_counter, dim=1, inputs=[candidates.counts, k, CANDIDATE_PEAKS + k], outputs=[self.report],
+                      device=self.device)
         for k, (count, index, capacity) in enumerate(detector.overflow_counters()):
             self._flag(count, index, capacity, f"broad phase counter {k}")
             if k < 5 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs, slabs

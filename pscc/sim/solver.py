@@ -41,7 +41,9 @@ from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.device_step import (
+    CANDIDATE_PEAKS,
     CG_FAILED,
+    CONTACTS,
     FLAG_NAMES,
     FLAG_OVERFLOW,
     HASH_PEAKS,
@@ -206,6 +208,8 @@ class ClothSolver:
         self._frame_graph_warm: tuple[Any, ...] | None = None
         self._projection_peaks: list[int] = []
         self._hash_peaks: list[list[int]] = []
+        self._spring_peaks: list[int] = []
+        self._candidate_peaks: list[list[int]] = []
         self.graph_unavailable: str | None = None
         """Why frames cannot be recorded into a graph on this device (``None``: they can); the frames then
         run eagerly, with the same results."""
@@ -248,22 +252,22 @@ class ClothSolver:
 
         ``collision`` (the detector's own accounting: BVH, front, hash tables, pair buffers; the
         intersection check shares the hash tables and does not count them again),
-        ``contact_springs``, ``projection`` (penetration-handling buffers), ``intersection_check``,
-        ``integrator`` (block-sparse system, PCG vectors and the model's arrays). States are owned by
-        the caller and not counted.
+        ``contact_springs`` (the springs and the tables that pick them), ``projection``
+        (penetration-handling buffers), ``intersection_check``, ``integrator`` (block-sparse system, PCG
+        vectors and the model's arrays) and ``device_step`` (the device step's report and loop flags,
+        the frame's targets table and the frame-start copies a fallback restores; 0 before the first
+        device frame). States are owned by the caller and not counted.
         """
         collision = self.detector.device_bytes() if self.detector.topology is not None else {"total": 0}
-        springs = self.proximity.springs
-        contact = springs.vertices.capacity + springs.weights.capacity + springs.normals.capacity
-        seen: set[int] = {id(springs.vertices), id(springs.weights), id(springs.normals)}
         # The detector's own accounting holds its hash, which the intersection check may share.
-        seen.add(id(getattr(self.detector, "spatial_hash", None)))
+        seen: set[int] = {id(getattr(self.detector, "spatial_hash", None))}
         parts = {
             "collision": int(collision["total"]),
-            "contact_springs": int(contact),
+            "contact_springs": warp_array_bytes(self.proximity, seen=seen),
             "projection": warp_array_bytes(self.projection, seen=seen),
             "intersection_check": warp_array_bytes(self.intersection_check, seen=seen),
             "integrator": warp_array_bytes(self.integrator, seen=seen) + warp_array_bytes(self.model, seen=seen),
+            "device_step": self._device_step.device_bytes() if self._device_step is not None else 0,
         }
         parts["total"] = sum(parts.values())
         return parts
@@ -397,7 +401,9 @@ class ClothSolver:
             failed = ["the linear solve overflowed"]
         if not failed:
             if runner.grow_near_full(report) | self._trim_projection(int(report[PROJECTION_PEAK])) \
-                    | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]]):
+                    | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]]) \
+                    | self._trim_springs(int(report[CONTACTS])) \
+                    | self._trim_candidates([int(v) for v in report[CANDIDATE_PEAKS:CANDIDATE_PEAKS + 2]]):
                 self._frame_graph = None  # record again, after an eager frame on the new buffers
                 self._frame_graph_warm = None
             self.time = times[-1]
@@ -407,10 +413,14 @@ class ClothSolver:
             return {"steps": steps, "seconds": {"total": time.perf_counter() - started}, "counts": counts}
         # Rare: restore the frame's start and run it on the host path (halvings, impact zones, growth).
         runner.restore()
+        self._rebuild_springs(state)
         self._frame_graph = None  # the host path may grow buffers: record again after an eager frame
         self._frame_graph_warm = None
         self.time = t0
         record = self.advance_frame_host(state, scratch, dt, steps)
+        # The host path sized what overflowed for this frame's need; contact that grew into an overflow
+        # usually grows on, so the buffers the failed frame filled beyond 85 % get the headroom too.
+        runner.grow_near_full(report)
         record["counts"]["device_fallbacks"] = 1
         record["fallback_reason"] = "; ".join(failed)
         record["seconds"]["total"] = time.perf_counter() - started
@@ -461,6 +471,53 @@ class ClothSolver:
             return False
         self.projection.trim(target)
         self._projection_peaks = []
+        return True
+
+    def _rebuild_springs(self, state: ClothState) -> None:
+        """The contact springs of ``state``: a DCD at its positions and :meth:`ProximityContacts.update_device`
+        (the springs a frame starts from, after :meth:`DeviceStep.restore`). They are the contacts the
+        previous step's end found at the same positions, bit for bit, except perhaps a pair at the edge of
+        the thickness (that DCD tested the candidates of the step's swept boxes; measured: 1 of 4,894 on
+        ``stack``). Allocates: when buffers grow. Capture-safe: no."""
+        contacts = self.detector.detect(state.positions, None, self.thickness)
+        self.proximity.update_device(contacts.args, state.positions)
+        while not self.proximity.check_capacity():
+            self.proximity.update_device(contacts.args, state.positions)
+
+    def _trim_springs(self, peak: int) -> bool:
+        """Shrink the contact springs (to 1.25 x the recent peak, keeping the stored ones) once the last
+        :data:`TRIM_FRAMES` frames used less than two thirds of them, like :meth:`_trim_hash`. Returns
+        whether the buffers changed."""
+        springs = self.proximity.springs
+        self._spring_peaks = (self._spring_peaks + [peak])[-TRIM_FRAMES:]
+        peak = max(self._spring_peaks)
+        if len(self._spring_peaks) < TRIM_FRAMES or springs.capacity <= 1.5 * peak + TRIM_SLACK:
+            return False
+        target = max(int(1.25 * peak) + TRIM_SLACK // 2, self.cloth_face_count // 4)
+        if target >= springs.capacity:
+            return False
+        springs.trim(target)
+        self.integrator.system.reserve_contacts(springs.capacity)
+        self._spring_peaks = []
+        return True
+
+    def _trim_candidates(self, peaks: list[int]) -> bool:
+        """Shrink the candidate pair buffers and the narrow phase's (to 1.25 x the recent peak) once the last
+        :data:`TRIM_FRAMES` frames used less than two thirds of them, like :meth:`_trim_hash`. Returns
+        whether the buffers changed."""
+        candidates = self.detector.candidates
+        self._candidate_peaks = (self._candidate_peaks + [peaks])[-TRIM_FRAMES:]
+        if len(self._candidate_peaks) < TRIM_FRAMES:
+            return False
+        targets = []
+        for k, capacity in enumerate((candidates.capacity_vf, candidates.capacity_ee)):
+            peak = max(frame[k] for frame in self._candidate_peaks)
+            targets.append(int(1.25 * peak) + TRIM_SLACK // 2 if capacity > 1.5 * peak + TRIM_SLACK else 0)
+        if not any(targets):
+            return False
+        candidates.trim(*targets)
+        self.detector.narrow.reserve(candidates)
+        self._candidate_peaks = []
         return True
 
     def _trim_hash(self, peaks: list[int]) -> bool:

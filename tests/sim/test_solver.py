@@ -160,11 +160,23 @@ def test_device_bytes_counts_every_structure_and_grows_with_the_mesh() -> None:
     small, large = (ClothSolver(build_scene("drape", n), device="cpu").device_bytes() for n in (400, 1600))
     for memory in (small, large):
         assert set(memory) == {"collision", "contact_springs", "projection", "intersection_check", "integrator",
-                               "total"}
-        assert all(v > 0 for v in memory.values())
+                               "device_step", "total"}
+        assert memory["device_step"] == 0  # no device frame yet
+        assert all(v > 0 for k, v in memory.items() if k != "device_step")
         assert memory["total"] == sum(v for k, v in memory.items() if k != "total")
     for key in ("collision", "intersection_check", "integrator"):
         assert large[key] > 2 * small[key], key
+
+
+def test_device_bytes_count_the_device_steps_frame_copies() -> None:
+    scene = build_scene("drape", 400)
+    solver = ClothSolver(scene, device="cpu")
+    state, scratch = solver.initial_state(), solver.initial_state()
+    solver.advance_frame(state, scratch, scene.time_step, 2)
+    memory = solver.device_bytes()
+    # At least the saved positions, velocities and warm start (3 x vec3 per vertex).
+    assert memory["device_step"] >= 3 * 12 * solver.model.vertex_count
+    assert memory["total"] == sum(v for k, v in memory.items() if k != "total")
 
 
 def test_per_object_materials_and_wind() -> None:
