@@ -64,6 +64,9 @@ class CandidatePairs:
         self.edge_edge = wp.empty(max(1, capacity_ee), dtype=wp.vec2i, device=device)
         self.counts = wp.zeros(2, dtype=wp.int32, device=device)
         self._host_counts = np.zeros(2, dtype=np.int64)
+        self.initial_capacities = (max(1, int(capacity_vf)), max(1, int(capacity_ee)))
+        """The slots the buffers were made with: room for contact before it happens, which
+        :meth:`trim` does not go below."""
 
     @property
     def capacity_vf(self) -> int:
@@ -124,16 +127,18 @@ class CandidatePairs:
             self.edge_edge = self._grown(capacity_ee, "edge_edge")
 
     def trim(self, capacity_vf: int, capacity_ee: int) -> None:
-        """Shrink the buffers (contents are not kept) that are larger than the given numbers of pairs (at
-        least one slot each): between broad phases only; the narrow phase's buffers follow with
+        """Shrink the buffers (contents are not kept) that are larger than the given numbers of pairs, but
+        not below :attr:`initial_capacities`: between broad phases only; the narrow phase's buffers follow with
         :meth:`pscc.collision.narrow_phase.NarrowPhase.reserve`, and recorded graphs must be recorded again.
 
         Allocates: only when a buffer shrinks. Capture-safe: no.
         """
-        if 0 < capacity_vf < self.capacity_vf:
-            self.vertex_face = wp.empty(int(capacity_vf), dtype=wp.vec2i, device=self.device)
-        if 0 < capacity_ee < self.capacity_ee:
-            self.edge_edge = wp.empty(int(capacity_ee), dtype=wp.vec2i, device=self.device)
+        capacity_vf = max(int(capacity_vf), self.initial_capacities[0])
+        capacity_ee = max(int(capacity_ee), self.initial_capacities[1])
+        if capacity_vf < self.capacity_vf:
+            self.vertex_face = wp.empty(capacity_vf, dtype=wp.vec2i, device=self.device)
+        if capacity_ee < self.capacity_ee:
+            self.edge_edge = wp.empty(capacity_ee, dtype=wp.vec2i, device=self.device)
 
     @property
     def vertex_face_count(self) -> int:

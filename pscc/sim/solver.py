@@ -502,7 +502,8 @@ class ClothSolver:
         return True
 
     def _trim_candidates(self, peaks: list[int]) -> bool:
-        """Shrink the candidate pair buffers and the narrow phase's (to 1.25 x the recent peak) once the last
+        """Shrink the candidate pair buffers and the narrow phase's (to 1.25 x the recent peak, never below
+        the sizes the detector made them with: room for contact before it happens) once the last
         :data:`TRIM_FRAMES` frames used less than two thirds of them, like :meth:`_trim_hash`. Returns
         whether the buffers changed."""
         candidates = self.detector.candidates
@@ -512,8 +513,9 @@ class ClothSolver:
         targets = []
         for k, capacity in enumerate((candidates.capacity_vf, candidates.capacity_ee)):
             peak = max(frame[k] for frame in self._candidate_peaks)
-            targets.append(int(1.25 * peak) + TRIM_SLACK // 2 if capacity > 1.5 * peak + TRIM_SLACK else 0)
-        if not any(targets):
+            target = max(int(1.25 * peak) + TRIM_SLACK // 2, candidates.initial_capacities[k])
+            targets.append(target if capacity > 1.5 * peak + TRIM_SLACK and target < capacity else capacity)
+        if targets == [candidates.capacity_vf, candidates.capacity_ee]:
             return False
         candidates.trim(*targets)
         self.detector.narrow.reserve(candidates)

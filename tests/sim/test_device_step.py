@@ -142,6 +142,13 @@ def test_springs_and_candidates_grown_ahead_of_need_shrink_back_to_their_peak() 
         assert record["counts"]["device_fallbacks"] == 0
         assert _intersection_free(sim)
     assert springs.capacity < big[0] / 4 and candidates.capacity_vf < big[1] / 4 and candidates.capacity_ee < big[2] / 4
+    # Never below the room the detector started with (contact to come needs it).
+    assert candidates.capacity_vf >= candidates.initial_capacities[0]
+    assert candidates.capacity_ee >= candidates.initial_capacities[1]
+    candidates.trim(1, 1)
+    assert (candidates.capacity_vf, candidates.capacity_ee) == candidates.initial_capacities
+    solver.detector.narrow.reserve(candidates)
+    solver._frame_graph = None
     assert solver.detector.narrow.edge_edge_toi.shape[0] == candidates.capacity_ee
     assert solver.integrator.system.contact_coefficients.shape[0] == springs.capacity
     # Still room for every contact: the counts of the last frame fit with the trim's margin.
