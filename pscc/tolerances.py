@@ -107,6 +107,13 @@ noise); its normal is then the pair's plane normal, oriented like the offset at 
 Length units (m in the simulator; 1e-12 m is far below the smallest thickness, so any pair whose
 offset is used is well resolved)."""
 
+CONTACT_FEATURE_WEIGHT: float = 1.0e-5
+"""A closest-point weight of a contact pair (a barycentric coordinate, or an edge parameter's distance
+to 0 or 1) at most this small puts the closest point on the feature's boundary: an edge or corner of
+the face, an end of the edge. float32 closest points put a point that is exactly on an edge up to
+~1e-6 inside it; the rows of one such contact are merged into one spring (:mod:`pscc.sim.proximity`).
+Dimensionless."""
+
 CONTACT_NORMAL_MIN_FALLBACK: float = 1.0e-20
 """A fallback direction (plane normal, start offset) shorter than this is treated as missing, and the
 last resort is +z. Squared-length scale of the products it comes from (cross products of edges);

@@ -105,6 +105,7 @@ class ContactArrays:
     vertices: wp.array(dtype=wp.vec4i)
     weights: wp.array(dtype=wp.vec4)
     normals: wp.array(dtype=wp.vec3)
+    multiplicity: wp.array(dtype=wp.int32)
     count: wp.array(dtype=wp.int32)
     rest_gap: float
 
@@ -310,7 +311,8 @@ def _assemble_contacts(
 ):
     """One thread per contact slot: spring force and friction damper, and the coefficients of its block K.
 
-    The contact's 16 blocks are ``A_ab = w_a w_b K`` (a, b free) with ``K = dt^2 k_c n n^T + dt c (I - n n^T)``;
+    The contact's 16 blocks are ``A_ab = w_a w_b K`` (a, b free) with ``K = dt^2 k_c n n^T + dt c (I - n n^T)``,
+    ``k_c`` times the spring's multiplicity;
     only ``(dt^2 k_c, dt c)`` is stored (zero for an inactive slot): the normal n is the spring's.
     """
     c = wp.tid()
@@ -336,6 +338,7 @@ def _assemble_contacts(
     stiffness = params.contact_stiffness
     if stiffness <= 0.0 and inverse_mass > 0.0:
         stiffness = params.contact_stiffness_scale / (inverse_mass * dt * dt)
+    stiffness = stiffness * float(contacts.multiplicity[c])  # the pair rows this spring stands for
     if gap >= 0.0 or stiffness <= 0.0:
         return
 
@@ -536,6 +539,7 @@ class ImplicitSystem:
             view.vertices = contacts.vertices
             view.weights = contacts.weights
             view.normals = contacts.normals
+            view.multiplicity = contacts.multiplicity
             view.count = contacts.count
             view.rest_gap = contacts.rest_gap
             wp.launch(_assemble_contacts, dim=contacts.capacity, device=self.device,

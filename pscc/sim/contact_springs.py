@@ -10,13 +10,18 @@ weights        (capacity,) vec4                VF: (1, -w_a, -w_b, -w_c) with ba
                                                EE: (1 - s, s, -(1 - t), -t) with edge parameters s, t
 normals        (capacity,) vec3                unit normal n pointing from the second feature (face,
                                                edge b) to the first (vertex, edge a)
+multiplicity   (capacity,) int32               pair rows the spring stands for: the factor on its
+                                               stiffness (>= 1; see :mod:`pscc.sim.proximity`)
 count          (1,) int32                      contacts stored; only rows [0, min(count, capacity))
                                                are read
+merge keys     (capacity,) int64, int32        the producer's hash table of edge and corner contact
+and counts                                     keys (:meth:`ContactSprings.merge_table`)
 rest_gap       float (host)                    the thickness h [m] the springs keep the features apart
 =============  ==============================  =======================================================
 
 The gap is ``g = n . sum_i w_i x_i - h``. While ``g < 0`` the integrator applies
-``f_i = -k_c g w_i n`` implicitly (Jacobian blocks ``-k_c w_i w_j n n^T``, normal frozen) and Coulomb
+``f_i = -m k_c g w_i n`` implicitly, m the multiplicity (Jacobian blocks ``-m k_c w_i w_j n n^T``, normal
+frozen), and Coulomb
 friction as an implicit tangential damper (see :class:`pscc.sim.ImplicitEuler`).
 
 Producers either upload pairs from the host (:meth:`ContactSprings.set`) or append on the device with
@@ -40,6 +45,16 @@ from pscc.errors import CapacityError, InputError
 
 MAX_CAPACITY: int = 2**31 - 1
 """Largest number of contacts one buffer can hold (int32 indexing)."""
+
+
+@wp.struct
+class MergeTable:
+    """Open-addressing hash table a producer merges duplicate contact rows with (:mod:`pscc.sim.proximity`)."""
+
+    keys: wp.array(dtype=wp.int64)
+    """(capacity,) contact keys, -1 for a free slot."""
+    counts: wp.array(dtype=wp.int32)
+    """(capacity,) rows seen per key."""
 
 
 class ContactSprings:
@@ -68,6 +83,12 @@ class ContactSprings:
         """(capacity,) vec4 signed weights of each contact (dimensionless)."""
         self.normals = wp.zeros(max(1, int(capacity)), dtype=wp.vec3, device=self.device)
         """(capacity,) vec3 unit normals of each contact."""
+        self.multiplicity = wp.ones(max(1, int(capacity)), dtype=wp.int32, device=self.device)
+        """(capacity,) int32 pair rows each contact stands for (the factor on its stiffness)."""
+        self.merge_keys = wp.full(max(1, int(capacity)), -1, dtype=wp.int64, device=self.device)
+        """(capacity,) int64 the merge table's keys (:meth:`merge_table`)."""
+        self.merge_counts = wp.zeros(max(1, int(capacity)), dtype=wp.int32, device=self.device)
+        """(capacity,) int32 the merge table's counts."""
         self.count = wp.zeros(1, dtype=wp.int32, device=self.device)
         """(1,) int32 number of contacts stored (may exceed capacity after an overflowing append)."""
 
@@ -75,6 +96,14 @@ class ContactSprings:
     def capacity(self) -> int:
         """Number of contact slots."""
         return int(self.vertices.shape[0])
+
+    def merge_table(self) -> MergeTable:
+        """The hash table (one slot per contact slot) a producer merges the rows of one contact with.
+        Allocates: no. Capture-safe: yes."""
+        table = MergeTable()
+        table.keys = self.merge_keys
+        table.counts = self.merge_counts
+        return table
 
     @property
     def host_count(self) -> int:
@@ -129,9 +158,7 @@ class ContactSprings:
             raise CapacityError(f"contact springs: {capacity} contacts exceed {MAX_CAPACITY}; "
                                 "reduce the thickness or split the scene")
         size = min(MAX_CAPACITY, int(capacity * 1.25) + 256)
-        self.vertices = self._resized(self.vertices, size)
-        self.weights = self._resized(self.weights, size)
-        self.normals = self._resized(self.normals, size)
+        self._resize_all(size)
 
     def trim(self, capacity: int) -> None:
         """Shrink the buffers to ``capacity`` slots (at least 256) when they are larger, keeping the
@@ -142,17 +169,16 @@ class ContactSprings:
         """
         size = max(256, int(capacity))
         if size < self.capacity:
-            self.vertices = self._resized(self.vertices, size)
-            self.weights = self._resized(self.weights, size)
-            self.normals = self._resized(self.normals, size)
+            self._resize_all(size)
 
-    def set(self, vertices: Any, weights: Any, normals: Any) -> None:
+    def set(self, vertices: Any, weights: Any, normals: Any, multiplicity: Any = None) -> None:
         """Replace the contacts with host data (grows the buffers as needed).
 
         Args:
             vertices: (k, 4) integer vertex ids, VF (p, a, b, c) or EE (a0, a1, b0, b1).
             weights: (k, 4) signed weights, VF (1, -w_a, -w_b, -w_c) or EE (1 - s, s, -(1 - t), -t).
             normals: (k, 3) unit normals from the second feature to the first (normalised here).
+            multiplicity: (k,) integers >= 1, the factor on each contact's stiffness (default 1).
 
         Raises:
             InputError: wrong shapes, negative ids, non-finite values or a zero normal.
@@ -185,7 +211,24 @@ class ContactSprings:
             self.weights.assign(np.concatenate([w, np.zeros((self.capacity - k, 4), np.float32)]))
             unit = (n / length[:, None]).astype(np.float32)
             self.normals.assign(np.concatenate([unit, np.zeros((self.capacity - k, 3), np.float32)]))
+        self.multiplicity.fill_(1)
+        if k and multiplicity is not None:
+            factors = np.asarray(as_numpy(multiplicity)).reshape(-1)
+            if factors.shape != (k,) or factors.dtype.kind not in "iu" or factors.min() < 1:
+                raise InputError("argument", "multiplicity", f"shape {factors.shape} dtype {factors.dtype} is not "
+                                 f"({k},) integers >= 1", "pass one stiffness factor >= 1 per contact")
+            self.multiplicity.assign(np.concatenate([factors.astype(np.int32),
+                                                     np.ones(self.capacity - k, np.int32)]))
         self.set_count(k)
+
+    def _resize_all(self, size: int) -> None:
+        self.vertices = self._resized(self.vertices, size)
+        self.weights = self._resized(self.weights, size)
+        self.normals = self._resized(self.normals, size)
+        self.multiplicity = self._resized(self.multiplicity, size)
+        # The merge table holds nothing between producer runs: new, empty.
+        self.merge_keys = wp.full(size, -1, dtype=wp.int64, device=self.device)
+        self.merge_counts = wp.zeros(size, dtype=wp.int32, device=self.device)
 
     def _resized(self, old: wp.array, size: int) -> wp.array:
         new = wp.zeros(size, dtype=old.dtype, device=self.device)

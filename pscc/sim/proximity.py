@@ -13,6 +13,19 @@ overflow keeps counting; :meth:`ProximityContacts.check_capacity` (a sync point)
 and asks for a re-run. :meth:`ProximityContacts.update` (host rows) is that device path on uploaded
 rows.
 
+**One spring per contact.** A vertex over a face's interior, or two edges crossing between their ends,
+is reported by one row. A contact at a face's edge or corner (closest barycentric weights 0) or at an
+edge's end (parameter 0 or 1), both up to :data:`pscc.tolerances.CONTACT_FEATURE_WEIGHT`, is reported
+by every face around that edge or corner and every edge around that end: on layered cloth most rows.
+Such rows carry the key of their closest features (vertex-edge: vertex and edge id; vertex-vertex:
+both vertex ids) into a hash table (:class:`ContactSprings` owns it, one slot per spring slot, linear
+probing with ``atomic_cas``); the first row of a key appends the spring, the others only count, and a
+last pass writes the count as the spring's ``multiplicity``, the factor on its stiffness. The forces
+and the matrix are those of one spring per row, as before the merge (the duplicates of a contact
+share its closest points), in a third to a quarter of the memory on layered cloth. A key that finds
+no free slot within :data:`MERGE_PROBES` probes gets its own spring (multiplicity 1): never a lost
+contact.
+
 The normal is the direction between the closest points. A configuration whose closest points
 coincide (distance below :data:`pscc.tolerances.CONTACT_NORMAL_MIN_OFFSET`, which the CCD minimum
 distance keeps from happening) falls back to the face normal (vertex-face) or the edges' cross product
@@ -24,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from pscc import tolerances
 from pscc.collision.contacts import (
     ContactArgs,
     edge_edge_hit,
@@ -32,9 +46,90 @@ from pscc.collision.contacts import (
     vertex_face_vertices,
 )
 from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
-from pscc.sim.contact_springs import ContactSprings
+from pscc.mesh.topology import MeshTopology
+from pscc.sim.contact_springs import ContactSprings, MergeTable
 
 wp.set_module_options({"enable_backward": False})
+
+MERGE_PROBES: int = 32
+"""Slots a contact key probes in the merge table before it gives up merging (its row then gets a spring
+of its own)."""
+
+_FEATURE_WEIGHT = wp.constant(tolerances.CONTACT_FEATURE_WEIGHT)
+_PROBES = wp.constant(MERGE_PROBES)
+_ID_LIMIT = wp.constant(wp.int64(1 << 30))
+
+
+@wp.func
+def _pack_key(kind: int, a: int, b: int) -> wp.int64:
+    """Key of a contact: ``kind`` (1 vertex-edge, 2 vertex-vertex) and two ids below 2^30; -1 (no
+    merge) for larger ids."""
+    if wp.int64(a) >= _ID_LIMIT or wp.int64(b) >= _ID_LIMIT:
+        return wp.int64(-1)
+    return (wp.int64(kind) << wp.int64(60)) | (wp.int64(a) << wp.int64(30)) | wp.int64(b)
+
+
+@wp.func
+def _vertex_vertex_key(a: int, b: int) -> wp.int64:
+    return _pack_key(2, wp.min(a, b), wp.max(a, b))
+
+
+@wp.func
+def _vertex_face_key(face_edges: wp.array(dtype=wp.vec3i), ids: wp.vec4i, face: int, w: wp.vec4) -> wp.int64:
+    """Key of a vertex-face row's contact (module docstring); -1 for a face-interior contact."""
+    zeros = int(0)
+    zero = int(0)
+    corner = int(0)
+    for k in range(3):
+        if -w[k + 1] <= _FEATURE_WEIGHT:
+            zeros += 1
+            zero = k
+        else:
+            corner = k
+    if zeros == 0:
+        return wp.int64(-1)
+    if zeros == 1:  # on the edge opposite corner `zero`: face_edges lists (f0 f1), (f1 f2), (f2 f0)
+        return _pack_key(1, ids[0], face_edges[face][(zero + 1) % 3])
+    return _vertex_vertex_key(ids[0], ids[1 + corner])
+
+
+@wp.func
+def _edge_edge_key(ids: wp.vec4i, edges: wp.vec2i, w: wp.vec4) -> wp.int64:
+    """Key of an edge-edge row's contact (module docstring); -1 when both closest points are inside their
+    edges. ``w`` is ``(1 - s, s, -(1 - t), -t)``; ``edges`` the two edge ids."""
+    a = int(-1)
+    if w[1] <= _FEATURE_WEIGHT:
+        a = ids[0]
+    elif w[0] <= _FEATURE_WEIGHT:
+        a = ids[1]
+    b = int(-1)
+    if -w[3] <= _FEATURE_WEIGHT:
+        b = ids[2]
+    elif -w[2] <= _FEATURE_WEIGHT:
+        b = ids[3]
+    if a >= 0 and b >= 0:
+        return _vertex_vertex_key(a, b)
+    if a >= 0:
+        return _pack_key(1, a, edges[1])
+    if b >= 0:
+        return _pack_key(1, b, edges[0])
+    return wp.int64(-1)
+
+
+@wp.func
+def _merge_slot(table: MergeTable, key: wp.int64) -> wp.vec2i:
+    """(slot, 1) when this call put ``key`` into the table, (slot, 0) when it was there, (-1, 0) when
+    :data:`MERGE_PROBES` slots were taken by other keys."""
+    size = table.keys.shape[0]
+    start = int((wp.uint64(key) * wp.uint64(0x9E3779B97F4A7C15)) >> wp.uint64(33)) % size
+    for probe in range(_PROBES):
+        slot = (start + probe) % size
+        old = wp.atomic_cas(table.keys, slot, wp.int64(-1), key)
+        if old == wp.int64(-1):
+            return wp.vec2i(slot, 1)
+        if old == key:
+            return wp.vec2i(slot, 0)
+    return wp.vec2i(-1, 0)
 
 
 @wp.kernel
@@ -43,16 +138,21 @@ def _append_contacts(
     contacts: ContactArgs,
     kinematic: wp.array(dtype=wp.int32),
     positions: wp.array(dtype=wp.vec3),
+    face_edges: wp.array(dtype=wp.vec3i),
     edge_edge: int,
+    merge: int,
     # out:
+    table: MergeTable,
     vertices: wp.array(dtype=wp.vec4i),
     weights: wp.array(dtype=wp.vec4),
     normals: wp.array(dtype=wp.vec3),
+    multiplicity: wp.array(dtype=wp.int32),
     count: wp.array(dtype=wp.int32),
 ):
     """One thread per vertex-face row of ``contacts`` (edge-edge row when ``edge_edge`` is not 0): a hit
     with a free vertex appends its spring (closest-point weights and unit normal) at the next counter
-    slot."""
+    slot, unless an earlier row of the same edge or corner contact did (module docstring): then it
+    only counts in the merge table."""
     row = wp.tid()
     ids = wp.vec4i(0, 0, 0, 0)
     if edge_edge != 0:
@@ -66,18 +166,51 @@ def _append_contacts(
     # Pairs made only of kinematic vertices: nothing can respond to them.
     if kinematic[ids[0]] != 0 and kinematic[ids[1]] != 0 and kinematic[ids[2]] != 0 and kinematic[ids[3]] != 0:
         return
-    slot = wp.atomic_add(count, 0, 1)
-    if slot >= vertices.shape[0]:
-        return  # overflow: the counter keeps the true number for check_capacity()
     x0 = positions[ids[0]]
     x1 = positions[ids[1]]
     x2 = positions[ids[2]]
     x3 = positions[ids[3]]
     w = pair_weights(x0, x1, x2, x3, edge_edge)
+    key = wp.int64(-1)
+    if merge == 0:
+        key = wp.int64(-1)
+    elif edge_edge != 0:
+        key = _edge_edge_key(ids, contacts.edge_edge[row], w)
+    else:
+        key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
+    merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
+    if key >= wp.int64(0):
+        found = _merge_slot(table, key)
+        if found[0] >= 0:
+            wp.atomic_add(table.counts, found[0], 1)
+            if found[1] == 0:
+                return  # counted in the spring of the row that put the key there
+            merged = -(found[0] + 2)
+    slot = wp.atomic_add(count, 0, 1)
+    if slot >= vertices.shape[0]:
+        return  # overflow: the counter keeps the true number for check_capacity()
     vertices[slot] = ids
     weights[slot] = w
+    multiplicity[slot] = merged
     plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
     normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
+
+
+@wp.kernel
+def _write_multiplicity(
+    # in:
+    counts: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    # out:
+    multiplicity: wp.array(dtype=wp.int32),
+):
+    """One thread per spring slot: a merged spring's table slot becomes the number of rows it stands for."""
+    c = wp.tid()
+    if c >= count[0]:
+        return
+    m = multiplicity[c]
+    if m < 0:
+        multiplicity[c] = counts[-m - 2]
 
 
 class ProximityContacts:
@@ -92,14 +225,26 @@ class ProximityContacts:
             such vertices are dropped (nothing can respond to them).
         rest_gap: the thickness h [m] the springs keep.
         device: Warp device.
+        topology: the faces' :class:`pscc.mesh.topology.MeshTopology`, whose edge ids the detector's
+            edge-edge rows use (built here when not given).
+        merge: one spring per contact (default) or, with False, one per row.
     """
 
-    def __init__(self, faces: np.ndarray, kinematic: np.ndarray, rest_gap: float, device: wp.DeviceLike) -> None:
+    def __init__(self, faces: np.ndarray, kinematic: np.ndarray, rest_gap: float, device: wp.DeviceLike,
+                 topology: MeshTopology | None = None, merge: bool = True) -> None:
         self.device = wp.get_device(device)
+        self.merge = bool(merge)
+        """Whether the rows of one edge or corner contact become one spring (module docstring); False
+        gives one spring per row, the reference the merged springs are tested against."""
         self.faces = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
         self.kinematic = np.asarray(kinematic, dtype=bool)
+        if topology is None:
+            topology = MeshTopology.from_faces(self.faces, self.kinematic.shape[0])
+        self._edges = np.asarray(topology.edges, dtype=np.int32).reshape(-1, 2)
         self.faces_device = wp.array(self.faces, dtype=wp.vec3i, device=self.device)
         """(m,) vec3i the collision mesh's faces (for host rows in :meth:`update`)."""
+        self.face_edges = wp.array(np.asarray(topology.face_edges, np.int32), dtype=wp.vec3i, device=self.device)
+        """(m,) vec3i edge ids of each face's (f0 f1), (f1 f2), (f2 f0): the edge of a vertex-edge key."""
         self.kinematic_flags = wp.array(self.kinematic.astype(np.int32), dtype=wp.int32, device=self.device)
         """(n,) int32 1 for kinematic vertices."""
         self.springs = ContactSprings(0, rest_gap=rest_gap, device=self.device)
@@ -123,11 +268,18 @@ class ProximityContacts:
         """
         springs = self.springs
         springs.count.zero_()
+        table = springs.merge_table()
+        table.keys.fill_(-1)
+        table.counts.zero_()
         for edge_edge, rows in ((0, contacts.vertex_face), (1, contacts.edge_edge)):
             wp.launch(_append_contacts, dim=rows.shape[0],
-                      inputs=[contacts, self.kinematic_flags, positions, edge_edge],
-                      outputs=[springs.vertices, springs.weights, springs.normals, springs.count],
+                      inputs=[contacts, self.kinematic_flags, positions, self.face_edges, edge_edge,
+                              int(self.merge)],
+                      outputs=[table, springs.vertices, springs.weights, springs.normals, springs.multiplicity,
+                               springs.count],
                       device=self.device)
+        wp.launch(_write_multiplicity, dim=springs.capacity, inputs=[table.counts, springs.count],
+                  outputs=[springs.multiplicity], device=self.device)
         return springs
 
     def check_capacity(self) -> bool:
@@ -169,12 +321,14 @@ class ProximityContacts:
             kept += int((~self.kinematic[ee].all(axis=1)).sum())
         self.springs.ensure(kept)
         dev = self.device
-        # The rows as a ContactArgs: the mesh's faces, two edges per edge-edge row, every row a hit.
+        # The rows as a ContactArgs: the mesh's faces and edges (edges of a row that the mesh lacks
+        # appended), every row a hit.
+        edges, edge_ids = self._edge_ids(ee.reshape(-1, 2))
         contacts = ContactArgs()
         contacts.faces = self.faces_device
-        contacts.edges = wp.array(ee.reshape(-1, 2), dtype=wp.vec2i, device=dev)
+        contacts.edges = wp.array(edges, dtype=wp.vec2i, device=dev)
         contacts.vertex_face = wp.array(vf, dtype=wp.vec2i, device=dev)
-        contacts.edge_edge = wp.array(np.arange(2 * l, dtype=np.int32).reshape(-1, 2), dtype=wp.vec2i, device=dev)
+        contacts.edge_edge = wp.array(edge_ids.reshape(-1, 2), dtype=wp.vec2i, device=dev)
         contacts.vertex_face_toi = wp.zeros(k, dtype=float, device=dev)
         contacts.edge_edge_toi = wp.zeros(l, dtype=float, device=dev)
         contacts.counts = wp.array(np.array([k, l], dtype=np.int32), dtype=wp.int32, device=dev)
@@ -182,3 +336,20 @@ class ProximityContacts:
             springs = self.update_device(contacts, positions)
             if self.check_capacity():
                 return springs
+
+    def _edge_ids(self, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh's edges with the vertex pairs it lacks appended, and the id of each pair in that list."""
+        edges = self._edges
+        if pairs.shape[0] == 0:
+            return (edges if edges.shape[0] else np.zeros((1, 2), np.int32)), np.zeros(0, np.int32)
+        ordered = pairs.astype(np.int64)  # as given: a row's vertex order is kept (mesh edges have a < b)
+        count = int(max(int(ordered.max()), int(edges.max()) if edges.size else 0)) + 1
+        codes = edges[:, 0].astype(np.int64) * count + edges[:, 1]  # sorted: edges are lexicographic
+        wanted = ordered[:, 0] * count + ordered[:, 1]
+        at = np.searchsorted(codes, wanted)
+        found = (at < codes.shape[0]) & (codes[np.minimum(at, codes.shape[0] - 1)] == wanted)
+        extra, inverse = np.unique(wanted[~found], return_inverse=True)
+        ids = at.astype(np.int32)
+        ids[~found] = edges.shape[0] + inverse.astype(np.int32)
+        extra_edges = np.stack([extra // count, extra % count], axis=1).astype(np.int32)
+        return np.concatenate([edges, extra_edges]), ids

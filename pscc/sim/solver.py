@@ -196,7 +196,8 @@ class ClothSolver:
         self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
-        self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device)
+        self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device,
+                                           topology=self.detector.topology)
         # Room for contact before it happens (the device path flags an overflow and redoes the frame).
         self.projection.reserve(self.cloth_face_count // 4)
         self.proximity.springs.ensure(self.cloth_face_count // 4)
@@ -291,6 +292,7 @@ class ClothSolver:
             "spring_vertices": springs.vertices.numpy()[:count].copy(),
             "spring_weights": springs.weights.numpy()[:count].copy(),
             "spring_normals": springs.normals.numpy()[:count].copy(),
+            "spring_multiplicity": springs.multiplicity.numpy()[:count].copy(),
             **{f"detector_{key}": value for key, value in self.detector.state_dict().items()},
         }
 
@@ -322,6 +324,11 @@ class ClothSolver:
             padded = np.zeros((buffer.shape[0], width), dtype=np.int32 if name == "vertices" else np.float32)
             padded[:count] = rows
             buffer.assign(padded)
+        # Checkpoints from before springs were merged hold one spring per row: multiplicity 1.
+        multiplicity = np.ones(springs.capacity, np.int32)
+        if "spring_multiplicity" in data:
+            multiplicity[:count] = np.asarray(data["spring_multiplicity"]).reshape(count)
+        springs.multiplicity.assign(multiplicity)
         springs.set_count(count)
         self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()
                                        if key.startswith("detector_")})

@@ -67,6 +67,7 @@ def test_the_system_holds_only_the_matrix_two_vectors_and_two_scalars_per_contac
     assert warp_array_bytes(matrix) <= matrix.offsets.capacity + matrix.columns.capacity + matrix.values.capacity + 64
     # Not the system's own: the model, the springs and the solver vectors its packed launches hold.
     seen = {id(model), id(springs.vertices), id(springs.weights), id(springs.normals), id(springs.count),
+            id(springs.multiplicity),
             id(system._product_launches)}
     assert warp_array_bytes(system, seen=seen) == expected
     assert system.contact_coefficients.shape == (springs.capacity,)
