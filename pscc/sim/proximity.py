@@ -171,13 +171,12 @@ def _append_contacts(
     x2 = positions[ids[2]]
     x3 = positions[ids[3]]
     w = pair_weights(x0, x1, x2, x3, edge_edge)
-    key = wp.int64(-1)
-    if merge == 0:
-        key = wp.int64(-1)
-    elif edge_edge != 0:
-        key = _edge_edge_key(ids, contacts.edge_edge[row], w)
-    else:
-        key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
+    key = wp.int64(-1)  # no merge: a face-interior or edges-interior contact, or merge off
+    if merge != 0:
+        if edge_edge != 0:
+            key = _edge_edge_key(ids, contacts.edge_edge[row], w)
+        else:
+            key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
     merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
     if key >= wp.int64(0):
         found = _merge_slot(table, key)
@@ -253,8 +252,11 @@ class ProximityContacts:
         """Replace the springs with the contacts of the hit rows of ``contacts`` (toi <= 1) at ``positions``.
 
         Vertex-face rows first, then edge-edge rows, each in row order on the CPU (in the order of the
-        atomic appends on a GPU); pairs of kinematic vertices only are dropped. ``springs.count``
-        counts past the capacity; :meth:`check_capacity` (a sync point) grows and asks for a re-run.
+        atomic appends on a GPU); pairs of kinematic vertices only are dropped, and the rows of one edge
+        or corner contact become one spring with their count as its multiplicity (module docstring; on
+        a GPU, which of the rows gives the spring varies). ``springs.count`` counts past the capacity;
+        :meth:`check_capacity` (a sync point) grows and asks for a re-run (an overflowing run's count can
+        exceed the need: its merge table, one slot per spring slot, may have been too small to merge).
 
         Args:
             contacts: the DCD narrow phase's rows (:class:`pscc.collision.contacts.ContactArgs`).
