@@ -150,6 +150,7 @@ class CollisionDetector:
                              "object ids", "pass e.g. {1, 3}, or () for none") from exc
         self._shrink_interval = int(shrink_interval)
         self._cell_size_factor = float(cell_size_factor)
+        self._lent_scratch: wp.array | None = None
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
         self._last_ccd_thickness: float | None = None
@@ -197,6 +198,8 @@ class CollisionDetector:
         # The detector sorts its final rows, so the hash's own pair sort is not needed.
         self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False,
                                         faces=self._faces, group_slab_test=self.method == "pscc")
+        if self._lent_scratch is not None:
+            self.spatial_hash.lend_scratch(self._lent_scratch)
         self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
@@ -631,6 +634,14 @@ class CollisionDetector:
             "device_bytes": self.device_bytes(),
         }
         return result
+
+    def lend_scratch(self, buffer: wp.array | None) -> None:
+        """Lend the spatial hash a buffer for its per-call entry tables (:meth:`SpatialHash.lend_scratch`,
+        whose contract the lender keeps: nothing in ``buffer`` is needed while this detector runs).
+        Methods without a hash ignore it. Allocates: the hash's entry tables again. Capture-safe: no."""
+        self._lent_scratch = buffer
+        if getattr(self, "spatial_hash", None) is not None:
+            self.spatial_hash.lend_scratch(buffer)
 
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``."""

@@ -309,6 +309,8 @@ class SpatialHash:
         kind = "cuda" if self.device.is_cuda else "cpu"
         self.test_threads = max(1, min(DEFAULT_TEST_THREADS[kind], -(-tests_per_launch // self.tests_per_thread)))
         self.cell_bits = min(31, max(MIN_CELL_BITS, m.bit_length()))
+        self._lent: wp.array | None = None
+        self._lent_names: set[str] = set()
         self._allocate_entries(max(1, 4 * m))
         capacity = 4 * m if pair_capacity is None else pair_capacity
         self._allocate_pairs(max(1, min(MAX_PAIRS, capacity)))
@@ -321,11 +323,41 @@ class SpatialHash:
 
     # ------------------------------------------------------------------ buffers
 
+    def lend_scratch(self, buffer: wp.array | None) -> None:
+        """Let the per-call entry tables (``entry_key``, then ``entry_face``, then ``cell_end``, as many
+        as fit) live in ``buffer``'s memory instead of buffers of their own.
+
+        For a lender whose buffer holds nothing it needs while :meth:`find_pairs_device` runs, and which
+        never reads what a call leaves there: the solver lends its BSR values, which are rewritten at
+        the start of every integration and dead from its end to the next one, the stretch in which the
+        broad phase, the CCD rounds and the intersection check hash. Nothing the hash reports lives in
+        these tables (pairs, counters and stats have buffers of their own). The buffer must outlive this
+        hash and keep its address; ``None`` takes the loan back. Allocates: the entry tables again.
+        Capture-safe: no.
+        """
+        if buffer is not None and (buffer.device != self.device or not buffer.is_contiguous):
+            raise InputError("argument", "buffer", "is not a contiguous array on the hash's device",
+                             "lend a contiguous wp.array allocated on the same device")
+        self._lent = buffer
+        self._allocate_entries(self.entry_capacity)
+
+    def _entry_table(self, name: str, offset: int, count: int, dtype: type) -> tuple[wp.array, int]:
+        """A table of ``count`` values: a view at byte ``offset`` of the lent buffer when it fits there
+        (returns the next free offset), else an allocation of its own."""
+        lent = self._lent
+        size = count * wp.types.type_size_in_bytes(dtype)
+        if lent is not None and offset + size <= lent.capacity:
+            view = wp.array(ptr=lent.ptr + offset, dtype=dtype, shape=(count,), device=self.device)
+            view._buffer = lent  # keep the lender alive as long as the view
+            self._lent_names.add(name)
+            return view, offset + (size + 15) // 16 * 16
+        return wp.empty(count, dtype=dtype, device=self.device), offset
+
     def _allocate_entries(self, capacity: int) -> None:
-        dev = self.device
         self.entry_capacity = capacity
-        self.entry_key = wp.empty(2 * capacity, dtype=wp.int64, device=dev)
-        self.entry_face = wp.empty(2 * capacity, dtype=wp.int32, device=dev)
+        self._lent_names = set()
+        self.entry_key, offset = self._entry_table("entry_key", 0, 2 * capacity, wp.int64)
+        self.entry_face, offset = self._entry_table("entry_face", offset, 2 * capacity, wp.int32)
         # The second halves of the entry buffers are the radix sort's scratch. Everything that reads the
         # ranks and the group starts runs after the sort and within the same call, so they live there
         # (views, not allocations: 12 bytes per entry slot less).
@@ -333,7 +365,7 @@ class SpatialHash:
         self.cell_rank = _int32_view(self.entry_key, 3 * capacity, capacity)
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
         self.group_start = _int32_view(self.entry_face, capacity, capacity)
-        self.cell_end = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.cell_end, _ = self._entry_table("cell_end", offset, capacity, wp.int32)
         if hasattr(self, "group_end"):
             self._make_row_views()
         else:
@@ -391,7 +423,8 @@ class SpatialHash:
                  "faces", "entry_key", "entry_face", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "row_span", "row_work",
                  "row_scan", "pairs", "pair_keys")
-        return {name: int(getattr(self, name).capacity) for name in names}
+        # Tables in a lent buffer (lend_scratch) are the lender's memory: counted as 0 here.
+        return {name: 0 if name in self._lent_names else int(getattr(self, name).capacity) for name in names}
 
     # ------------------------------------------------------------------ validation
 

@@ -186,6 +186,9 @@ class ClothSolver:
         self.detector = CollisionDetector(self.collision_faces, method=self.contact.method,
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
                                           device=str(self.device))
+        # The BSR values are dead from the end of one integration to the start of the next, the stretch
+        # in which the detector hashes: its entry tables live there (SpatialHash.lend_scratch).
+        self.detector.lend_scratch(self.integrator.system.matrix.values)
         self.thickness = max(float(m.thickness) for m in materials)
         if self.thickness <= 0.0:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")

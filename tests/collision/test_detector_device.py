@@ -120,3 +120,28 @@ def test_trimmed_hash_tables_still_give_every_pair() -> None:
     assert all(capacity <= 8 for capacity in spatial_hash.capacities().values())
     _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
     assert spatial_hash.capacities()[0] >= min(before[0], spatial_hash.stats.entries)
+
+
+def test_hash_tables_in_a_lent_buffer_give_the_same_pairs_and_count_as_the_lenders() -> None:
+    # The solver lends its BSR values: whatever the lender writes there between calls is overwritten
+    # by the next call before it is read.
+    mesh = folded_sheet(800, layers=3, seed=7)
+    expected = CollisionDetector(mesh.faces, device="cpu").detect(mesh.vertices, mesh.vertices_end)
+    detector = CollisionDetector(mesh.faces, device="cpu")
+    own = CollisionDetector(mesh.faces, device="cpu")
+    own.detect(mesh.vertices, mesh.vertices_end)
+    lent = wp.zeros(1 << 20, dtype=wp.float32, device="cpu")
+    detector.lend_scratch(lent)
+    for _ in range(2):
+        _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
+        lent.fill_(-3.0)  # the lender's own use of its buffer between calls
+    spatial_hash = detector.spatial_hash
+    assert "entry_key" in spatial_hash._lent_names
+    assert spatial_hash.entry_key.ptr == lent.ptr
+    assert detector.device_bytes()["spatial_hash"] < own.device_bytes()["spatial_hash"]
+    # A buffer too small for any table: every table is the hash's own again.
+    detector.lend_scratch(wp.zeros(4, dtype=wp.float32, device="cpu"))
+    assert not spatial_hash._lent_names
+    _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
+    detector.lend_scratch(None)
+    assert detector.device_bytes()["spatial_hash"] == own.device_bytes()["spatial_hash"]
