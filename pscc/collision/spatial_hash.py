@@ -116,6 +116,11 @@ _GROWTH: float = 1.25
 """Grown buffers get this factor over the exact count, so small increases do not re-grow."""
 
 
+def _aligned(size: int) -> int:
+    """``size`` bytes rounded up to 16 (the offsets of tables placed one after another)."""
+    return (int(size) + 15) // 16 * 16
+
+
 def _int32_view(buffer: wp.array, offset: int, count: int) -> wp.array:
     """``count`` int32 values starting ``offset`` int32 slots into ``buffer``'s memory (a view: ``buffer``
     owns the memory and must outlive it)."""
@@ -324,8 +329,9 @@ class SpatialHash:
     # ------------------------------------------------------------------ buffers
 
     def lend_scratch(self, buffer: wp.array | None) -> None:
-        """Let the per-call entry tables (``entry_key``, then ``entry_face``, then ``cell_end``, as many
-        as fit) live in ``buffer``'s memory instead of buffers of their own.
+        """Let the per-call tables of entries, groups and rows (``entry_key``, ``entry_face``,
+        ``cell_end``, ``group_end``, ``group_cell``, ``row_span``, ``row_work``, ``row_scan``, in this
+        order while they fit) live in ``buffer``'s memory instead of buffers of their own.
 
         For a lender whose buffer holds nothing it needs while :meth:`find_pairs_device` runs, and which
         never reads what a call leaves there: the solver lends its BSR values, which are rewritten at
@@ -339,7 +345,22 @@ class SpatialHash:
             raise InputError("argument", "buffer", "is not a contiguous array on the hash's device",
                              "lend a contiguous wp.array allocated on the same device")
         self._lent = buffer
-        self._allocate_entries(self.entry_capacity)
+        self._place_tables()
+
+    def _chosen_for_loan(self, sizes: list[int]) -> set[int]:
+        """The tables (indices into ``sizes``, bytes each) to place in the lent buffer: the set of the ten
+        largest that fills most of it (every subset of them is tried; ties go to the set found first)."""
+        if self._lent is None:
+            return set()
+        room = int(self._lent.capacity)
+        largest = sorted(range(len(sizes)), key=lambda k: -sizes[k])[:10]
+        best, best_bytes = set(), 0
+        for subset in range(1 << len(largest)):
+            mask = sum(1 << largest[b] for b in range(len(largest)) if subset >> b & 1)
+            total = sum(size for k, size in enumerate(sizes) if mask >> k & 1)
+            if best_bytes < total <= room:
+                best, best_bytes = {k for k in range(len(sizes)) if mask >> k & 1}, total
+        return best
 
     def _entry_table(self, name: str, offset: int, count: int, dtype: type) -> tuple[wp.array, int]:
         """A table of ``count`` values: a view at byte ``offset`` of the lent buffer when it fits there
@@ -350,69 +371,77 @@ class SpatialHash:
             view = wp.array(ptr=lent.ptr + offset, dtype=dtype, shape=(count,), device=self.device)
             view._buffer = lent  # keep the lender alive as long as the view
             self._lent_names.add(name)
-            return view, offset + (size + 15) // 16 * 16
+            return view, offset + _aligned(size)
         return wp.empty(count, dtype=dtype, device=self.device), offset
 
     def _allocate_entries(self, capacity: int) -> None:
         self.entry_capacity = capacity
-        self._lent_names = set()
-        self.entry_key, offset = self._entry_table("entry_key", 0, 2 * capacity, wp.int64)
-        self.entry_face, offset = self._entry_table("entry_face", offset, 2 * capacity, wp.int32)
-        # The second halves of the entry buffers are the radix sort's scratch. Everything that reads the
-        # ranks and the group starts runs after the sort and within the same call, so they live there
-        # (views, not allocations: 12 bytes per entry slot less).
-        self.group_rank = _int32_view(self.entry_key, 2 * capacity, capacity)
-        self.cell_rank = _int32_view(self.entry_key, 3 * capacity, capacity)
-        # group_start / cell_end first hold the head flags that are scanned into the ranks.
-        self.group_start = _int32_view(self.entry_face, capacity, capacity)
-        self.cell_end, _ = self._entry_table("cell_end", offset, capacity, wp.int32)
-        if hasattr(self, "group_end"):
-            self._make_row_views()
+        if not hasattr(self, "group_capacity"):
+            self._allocate_groups(max(1, capacity // 4))  # places the tables
         else:
-            self._allocate_groups(max(1, capacity // 4))
+            self.group_capacity = max(1, min(self.group_capacity, capacity))
+            self._place_tables()
 
     def _allocate_groups(self, capacity: int) -> None:
         """Per-group tables, sized by the group count (far below the entry count on cloth); never
         more slots than entries (the rank buffers of the entries hold the per-group row counts)."""
-        dev = self.device
-        capacity = max(1, min(capacity, self.entry_capacity))
-        self.group_capacity = capacity
-        self.group_end = wp.empty(capacity, dtype=wp.int32, device=dev)
-        self.group_cell = wp.empty(capacity, dtype=wp.int32, device=dev)
+        self.group_capacity = max(1, min(capacity, self.entry_capacity))
         if not hasattr(self, "group_axis"):
-            self._allocate_slabs(capacity if self.group_slab_test else 1)
-        self._make_row_views()
+            self._allocate_slabs(self.group_capacity if self.group_slab_test else 1)
+        self._place_tables()
 
     def _allocate_slabs(self, capacity: int) -> None:
         """Per-group slab-test tables, sized by the groups of the calls that slab-test (calls without
         node ids, e.g. an intersection check sharing this hash, have one group per face and never
         touch them)."""
-        dev = self.device
         self.slab_capacity = max(1, int(capacity))
-        self.group_axis = wp.empty(self.slab_capacity, dtype=wp.vec3, device=dev)
-        self.group_slab = wp.empty(self.slab_capacity, dtype=wp.vec2, device=dev)
-        self.group_mask = wp.empty(self.slab_capacity, dtype=wp.uint64, device=dev)
-
-    def _make_row_views(self) -> None:
-        """The rank buffers are free once the tables are written: they hold the rows per group. The
-        views are made here, when a buffer is allocated, so the device path makes none."""
-        self.row_count = self.group_rank[: self.group_capacity]
-        self.row_end = self.cell_rank[: self.group_capacity]
+        self._place_tables()
 
     def _allocate_rows(self, capacity: int) -> None:
         """Work rows, sized by the row count (at most the group count without the slab test)."""
-        dev = self.device
         self.row_capacity = capacity
-        self.row_span = wp.empty(capacity, dtype=wp.vec3i, device=dev)
-        self.row_work = wp.empty(capacity, dtype=wp.int64, device=dev)
-        self.row_scan = wp.empty(capacity, dtype=wp.int64, device=dev)
+        self._place_tables()
+
+    def _place_tables(self) -> None:
+        """(Re)make the per-call tables of entries, groups and rows at their capacities: in the lent
+        buffer (:meth:`lend_scratch`) while they fit, in this order, else in buffers of their own. Their
+        contents live within one call, so none is kept."""
+        if not hasattr(self, "slab_capacity"):
+            return  # still in the constructor: placed once the group tables have a size
+        n, g, slabs = self.entry_capacity, self.group_capacity, self.slab_capacity
+        rows = getattr(self, "row_capacity", 1)
+        # Sorting the pairs needs twice the slots (radix-sort scratch) and a key per pair.
+        pair_slots = 2 * getattr(self, "pair_capacity", 1) if self.sort_pairs else getattr(self, "pair_capacity", 1)
+        tables = (("entry_key", 2 * n, wp.int64), ("entry_face", 2 * n, wp.int32), ("cell_end", n, wp.int32),
+                  ("group_end", g, wp.int32), ("group_cell", g, wp.int32), ("row_span", rows, wp.vec3i),
+                  ("row_work", rows, wp.int64), ("row_scan", rows, wp.int64), ("group_axis", slabs, wp.vec3),
+                  ("group_slab", slabs, wp.vec2), ("group_mask", slabs, wp.uint64),
+                  ("pairs", pair_slots, wp.vec2i), ("pair_keys", pair_slots if self.sort_pairs else 1, wp.int64))
+        lent = self._chosen_for_loan([_aligned(count * wp.types.type_size_in_bytes(dtype))
+                                      for _, count, dtype in tables])
+        self._lent_names = set()
+        offset = 0
+        for k, (name, count, dtype) in enumerate(tables):
+            if k in lent:
+                table, offset = self._entry_table(name, offset, count, dtype)
+            else:
+                table = wp.empty(count, dtype=dtype, device=self.device)
+            setattr(self, name, table)
+        # The second halves of the entry buffers are the radix sort's scratch. Everything that reads the
+        # ranks and the group starts runs after the sort and within the same call, so they live there
+        # (views, not allocations: 12 bytes per entry slot less).
+        self.group_rank = _int32_view(self.entry_key, 2 * n, n)
+        self.cell_rank = _int32_view(self.entry_key, 3 * n, n)
+        # group_start / cell_end first hold the head flags that are scanned into the ranks.
+        self.group_start = _int32_view(self.entry_face, n, n)
+        # The rank buffers are free once the tables are written: they hold the rows per group (views made
+        # here, when the tables are placed, so the device path makes none).
+        self.row_count = self.group_rank[:g]
+        self.row_end = self.cell_rank[:g]
 
     def _allocate_pairs(self, capacity: int) -> None:
         self.pair_capacity = capacity
-        # Sorting needs twice the slots (radix-sort scratch) and a key per pair.
-        slots = 2 * capacity if self.sort_pairs else capacity
-        self.pairs = wp.empty(slots, dtype=wp.vec2i, device=self.device)
-        self.pair_keys = wp.empty(slots if self.sort_pairs else 1, dtype=wp.int64, device=self.device)
+        self._place_tables()
 
     @property
     def device_bytes(self) -> dict[str, int]:
