@@ -636,9 +636,9 @@ class CollisionDetector:
         return result
 
     def lend_scratch(self, buffer: wp.array | None) -> None:
-        """Lend the spatial hash a buffer for its per-call entry tables (:meth:`SpatialHash.lend_scratch`,
-        whose contract the lender keeps: nothing in ``buffer`` is needed while this detector runs).
-        Methods without a hash ignore it. Allocates: the hash's entry tables again. Capture-safe: no."""
+        """Lend the spatial hash a buffer for its per-call tables (:meth:`SpatialHash.lend_scratch`, whose
+        contract the lender keeps: nothing in ``buffer`` is needed, or read afterwards, while a call of this
+        detector runs). Methods without a hash ignore it. Allocates: the hash's tables again. Capture-safe: no."""
         self._lent_scratch = buffer
         if getattr(self, "spatial_hash", None) is not None:
             self.spatial_hash.lend_scratch(buffer)

@@ -121,11 +121,11 @@ def _aligned(size: int) -> int:
     return (int(size) + 15) // 16 * 16
 
 
-def _int32_view(buffer: wp.array, offset: int, count: int) -> wp.array:
-    """``count`` int32 values starting ``offset`` int32 slots into ``buffer``'s memory (a view: ``buffer``
-    owns the memory and must outlive it)."""
-    view = wp.array(ptr=buffer.ptr + 4 * offset, dtype=wp.int32, shape=(count,), device=buffer.device)
-    view._buffer = buffer  # keep the owner alive as long as the view
+def _view(buffer: wp.array, byte_offset: int, count: int, dtype: type) -> wp.array:
+    """``count`` values of ``dtype`` starting ``byte_offset`` bytes into ``buffer``'s memory (a view:
+    ``buffer`` owns the memory, and the view keeps a reference to it)."""
+    view = wp.array(ptr=buffer.ptr + byte_offset, dtype=dtype, shape=(count,), device=buffer.device)
+    view._buffer = buffer
     return view
 
 
@@ -329,17 +329,17 @@ class SpatialHash:
     # ------------------------------------------------------------------ buffers
 
     def lend_scratch(self, buffer: wp.array | None) -> None:
-        """Let the per-call tables of entries, groups and rows (``entry_key``, ``entry_face``,
-        ``cell_end``, ``group_end``, ``group_cell``, ``row_span``, ``row_work``, ``row_scan``, in this
-        order while they fit) live in ``buffer``'s memory instead of buffers of their own.
+        """Let the per-call tables (entries, groups, slab tables, rows and the pairs; see
+        :meth:`_place_tables`) live in ``buffer``'s memory, as many as fit, largest first; the others
+        keep buffers of their own.
 
-        For a lender whose buffer holds nothing it needs while :meth:`find_pairs_device` runs, and which
-        never reads what a call leaves there: the solver lends its BSR values, which are rewritten at
-        the start of every integration and dead from its end to the next one, the stretch in which the
-        broad phase, the CCD rounds and the intersection check hash. Nothing the hash reports lives in
-        these tables (pairs, counters and stats have buffers of their own). The buffer must outlive this
-        hash and keep its address; ``None`` takes the loan back. Allocates: the entry tables again.
-        Capture-safe: no.
+        For a lender whose buffer holds nothing it needs from the start of a :meth:`find_pairs_device`
+        call until the caller has read that call's :attr:`pairs`, and which never reads what the hash
+        leaves there. The solver lends its BSR values: they are rewritten at the start of every
+        integration and dead from its end to the next one, the stretch in which the broad phase, the CCD
+        rounds and the intersection check hash and turn the pairs into feature pairs. Counters and stats
+        keep buffers of their own. The buffer must outlive this hash and keep its address; ``None``
+        takes the loan back. Allocates: the tables again. Capture-safe: no.
         """
         if buffer is not None and (buffer.device != self.device or not buffer.is_contiguous):
             raise InputError("argument", "buffer", "is not a contiguous array on the hash's device",
@@ -348,19 +348,17 @@ class SpatialHash:
         self._place_tables()
 
     def _chosen_for_loan(self, sizes: list[int]) -> set[int]:
-        """The tables (indices into ``sizes``, bytes each) to place in the lent buffer: the set of the ten
-        largest that fills most of it (every subset of them is tried; ties go to the set found first)."""
+        """The tables (indices into ``sizes``, bytes each) to place in the lent buffer: largest first,
+        each one that still fits."""
         if self._lent is None:
             return set()
         room = int(self._lent.capacity)
-        largest = sorted(range(len(sizes)), key=lambda k: -sizes[k])[:10]
-        best, best_bytes = set(), 0
-        for subset in range(1 << len(largest)):
-            mask = sum(1 << largest[b] for b in range(len(largest)) if subset >> b & 1)
-            total = sum(size for k, size in enumerate(sizes) if mask >> k & 1)
-            if best_bytes < total <= room:
-                best, best_bytes = {k for k in range(len(sizes)) if mask >> k & 1}, total
-        return best
+        chosen = set()
+        for k in sorted(range(len(sizes)), key=lambda k: -sizes[k]):
+            if sizes[k] <= room:
+                chosen.add(k)
+                room -= sizes[k]
+        return chosen
 
     def _entry_table(self, name: str, offset: int, count: int, dtype: type) -> tuple[wp.array, int]:
         """A table of ``count`` values: a view at byte ``offset`` of the lent buffer when it fits there
@@ -368,10 +366,8 @@ class SpatialHash:
         lent = self._lent
         size = count * wp.types.type_size_in_bytes(dtype)
         if lent is not None and offset + size <= lent.capacity:
-            view = wp.array(ptr=lent.ptr + offset, dtype=dtype, shape=(count,), device=self.device)
-            view._buffer = lent  # keep the lender alive as long as the view
             self._lent_names.add(name)
-            return view, offset + _aligned(size)
+            return _view(lent, offset, count, dtype), offset + _aligned(size)
         return wp.empty(count, dtype=dtype, device=self.device), offset
 
     def _allocate_entries(self, capacity: int) -> None:
@@ -430,10 +426,10 @@ class SpatialHash:
         # The second halves of the entry buffers are the radix sort's scratch. Everything that reads the
         # ranks and the group starts runs after the sort and within the same call, so they live there
         # (views, not allocations: 12 bytes per entry slot less).
-        self.group_rank = _int32_view(self.entry_key, 2 * n, n)
-        self.cell_rank = _int32_view(self.entry_key, 3 * n, n)
+        self.group_rank = _view(self.entry_key, 8 * n, n, wp.int32)
+        self.cell_rank = _view(self.entry_key, 12 * n, n, wp.int32)
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
-        self.group_start = _int32_view(self.entry_face, n, n)
+        self.group_start = _view(self.entry_face, 4 * n, n, wp.int32)
         # The rank buffers are free once the tables are written: they hold the rows per group (views made
         # here, when the tables are placed, so the device path makes none).
         self.row_count = self.group_rank[:g]

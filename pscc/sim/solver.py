@@ -187,7 +187,7 @@ class ClothSolver:
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
                                           device=str(self.device))
         # The BSR values are dead from the end of one integration to the start of the next, the stretch
-        # in which the detector hashes: its entry tables live there (SpatialHash.lend_scratch).
+        # in which the detector hashes: its per-call tables live there (SpatialHash.lend_scratch).
         self.detector.lend_scratch(self.integrator.system.matrix.values)
         self.thickness = max(float(m.thickness) for m in materials)
         if self.thickness <= 0.0:
@@ -315,6 +315,12 @@ class ClothSolver:
                 raise InputError("checkpoint", key, f"shape {np.shape(data[key])} is not ({n}, 3)",
                                  "resume with the scene and size the checkpoint was written for")
         count = int(np.shape(data["spring_vertices"])[0])
+        # Checkpoints from before springs were merged hold one spring per row: multiplicity 1.
+        factors = np.asarray(data.get("spring_multiplicity", np.ones(count, np.int32)))
+        if factors.shape != (count,) or factors.dtype.kind not in "iu" or (count and factors.min() < 1):
+            raise InputError("checkpoint", "spring_multiplicity",
+                             f"shape {factors.shape} dtype {factors.dtype} is not ({count},) integers >= 1",
+                             "resume from a checkpoint written by pscc simulate")
         state.positions.assign(np.asarray(data["positions"], np.float32))
         state.velocities.assign(np.asarray(data["velocities"], np.float32))
         self.integrator.dv.assign(np.asarray(data["warm_start"], np.float32))
@@ -327,10 +333,8 @@ class ClothSolver:
             padded = np.zeros((buffer.shape[0], width), dtype=np.int32 if name == "vertices" else np.float32)
             padded[:count] = rows
             buffer.assign(padded)
-        # Checkpoints from before springs were merged hold one spring per row: multiplicity 1.
         multiplicity = np.ones(springs.capacity, np.int32)
-        if "spring_multiplicity" in data:
-            multiplicity[:count] = np.asarray(data["spring_multiplicity"]).reshape(count)
+        multiplicity[:count] = factors
         springs.multiplicity.assign(multiplicity)
         springs.set_count(count)
         self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()

@@ -238,6 +238,29 @@ def test_checkpoint_of_another_scene_is_refused() -> None:
         solver.load_state_dict(data, solver.initial_state())
 
 
+def test_checkpoint_spring_multiplicity_is_checked_and_defaults_to_one() -> None:
+    scene = build_scene("stack", 300)
+    solver = ClothSolver(scene, device="cpu")
+    state, other = solver.initial_state(), solver.initial_state()
+    for _ in range(40):  # the layers settle onto each other
+        solver.step(state, other, scene.time_step)
+        state, other = other, state
+    data = solver.state_dict(state)
+    count = data["spring_vertices"].shape[0]
+    assert count > 0 and data["spring_multiplicity"].max() > 1  # stacked layers: merged rows
+    resumed = ClothSolver(scene, device="cpu")
+    target = resumed.initial_state()
+    bad = dict(data, spring_multiplicity=np.zeros(count, np.int32))
+    before = target.positions.numpy().copy()
+    with pytest.raises(InputError, match="spring_multiplicity"):
+        resumed.load_state_dict(bad, target)
+    np.testing.assert_array_equal(target.positions.numpy(), before)  # nothing written half-way
+    # A checkpoint written before springs were merged: one spring per row.
+    old = {k: v for k, v in data.items() if k != "spring_multiplicity"}
+    resumed.load_state_dict(old, target)
+    np.testing.assert_array_equal(resumed.proximity.springs.multiplicity.numpy()[:count], np.ones(count))
+
+
 def test_rejected_steps_are_halved_and_stay_intersection_free(monkeypatch: pytest.MonkeyPatch) -> None:
     scene = build_scene("drape", 200)
     scene.vertices = scene.vertices - np.array([0, 0, 0.09], np.float32)
