@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +31,7 @@ from pscc.collision.brute_force import BroadPhaseBruteForce
 from pscc.collision.bvh import MaterialBvh
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.contacts import DeviceContacts
+from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
@@ -151,6 +153,7 @@ class CollisionDetector:
         self._shrink_interval = int(shrink_interval)
         self._cell_size_factor = float(cell_size_factor)
         self._lent_scratch: wp.array | None = None
+        self._lend_pair_buffers = False
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
         self._last_ccd_thickness: float | None = None
@@ -175,8 +178,11 @@ class CollisionDetector:
         self._edge_first = np.ascontiguousarray(self.topology.edges[:, 0], dtype=np.int32)
         self._edge_second = np.ascontiguousarray(self.topology.edges[:, 1], dtype=np.int32)
         device = self.device
-        self._faces = wp.array(mesh.faces, dtype=wp.vec3i, device=device)
-        self._edges = wp.array(self.topology.edges, dtype=wp.vec2i, device=device)
+        self.device_topology = DeviceTopology.upload(mesh.faces, self.topology, device)
+        """The mesh's faces, edges and face edges on the device, shared with the intersection check and the
+        contact springs of a simulator (:class:`~pscc.collision.device_topology.DeviceTopology`)."""
+        self._faces = self.device_topology.faces
+        self._edges = self.device_topology.edges
         self._object_ids = wp.array(mesh.object_ids, dtype=wp.int32, device=device)
         self._positions_t0 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self._positions_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
@@ -198,9 +204,9 @@ class CollisionDetector:
         # The detector sorts its final rows, so the hash's own pair sort is not needed.
         self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False,
                                         faces=self._faces, group_slab_test=self.method == "pscc")
-        if self._lent_scratch is not None:
-            self.spatial_hash.lend_scratch(self._lent_scratch)
-        self.feature_pairs = FeaturePairs(mesh.faces, self.topology, self._faces, self._edges, device)
+        if self._lent_scratch is not None or self._lend_pair_buffers:
+            self.spatial_hash.lend_scratch(self._lent_scratch, self._scratch_source())
+        self.feature_pairs = FeaturePairs(mesh.faces, self.device_topology, device)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
@@ -635,18 +641,43 @@ class CollisionDetector:
         }
         return result
 
-    def lend_scratch(self, buffer: wp.array | None) -> None:
-        """Lend the spatial hash a buffer for its per-call tables (:meth:`SpatialHash.lend_scratch`, whose
-        contract the lender keeps: nothing in ``buffer`` is needed, or read afterwards, while a call of this
-        detector runs). Methods without a hash ignore it. Allocates: the hash's tables again. Capture-safe: no."""
+    def lend_scratch(self, buffer: wp.array | None, *, pair_buffers: bool = False) -> None:
+        """Lend the spatial hash memory for its per-call tables (:meth:`SpatialHash.lend_scratch`, whose
+        contract the lender keeps). Methods without a hash ignore it.
+
+        Args:
+            buffer: a buffer of the caller's, dead while this detector runs (``None``: none).
+            pair_buffers: also lend the hash this detector's candidate pairs and times of impact. Only
+                for a caller that reads the results of a narrow phase (:class:`DeviceContacts`) before
+                the next call of this detector *or of anything sharing its hash*, e.g. an
+                :class:`~pscc.collision.intersection.IntersectionCheck`: the hash writes over them.
+
+        Allocates: the hash's tables again. Capture-safe: no.
+        """
         self._lent_scratch = buffer
+        self._lend_pair_buffers = bool(pair_buffers)
         if getattr(self, "spatial_hash", None) is not None:
-            self.spatial_hash.lend_scratch(buffer)
+            self.spatial_hash.lend_scratch(buffer, self._scratch_source())
+
+    def _scratch_source(self) -> Callable[[], list[wp.array]] | None:
+        """The candidate and time-of-impact buffers as they are now (they are replaced when they grow or
+        shrink), for the hash to place tables in; ``None`` unless :meth:`lend_scratch` asked for it."""
+        if not self._lend_pair_buffers:
+            return None
+        return lambda: [self.candidates.edge_edge, self.candidates.vertex_face,
+                        self.narrow.edge_edge_toi, self.narrow.vertex_face_toi]
+
+    def refresh_loans(self) -> None:
+        """Place the hash's tables again after the candidate buffers were resized
+        (:meth:`SpatialHash.refresh_loans`), so that a graph recorded next allocates nothing. Allocates:
+        only then. Capture-safe: no."""
+        if getattr(self, "spatial_hash", None) is not None:
+            self.spatial_hash.refresh_loans()
 
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``."""
         sizes = {
-            "mesh": self._faces.capacity + self._edges.capacity + self._object_ids.capacity
+            "mesh": sum(a.capacity for a in self.device_topology.arrays) + self._object_ids.capacity
             + self._positions_t0.capacity + self._positions_t1.capacity,
             "boxes": self.boxes.device_bytes,
             "candidates": self.candidates.device_bytes,

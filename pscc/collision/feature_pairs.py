@@ -39,6 +39,7 @@ import warp as wp
 from pscc import tolerances
 from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.pair_filter import triangle_pair_separated
 from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.ccd import CcdParameters, ccd_parameters
@@ -219,23 +220,19 @@ class FeaturePairs:
 
     Args:
         faces: (face_count, 3) int32 host faces.
-        topology: the mesh's topology tables.
-        faces_device: (face_count,) ``wp.vec3i`` device faces.
-        edges_device: (edge_count,) ``wp.vec2i`` device edges.
+        device_topology: those faces' topology on the device (shared with the caller, not copied).
         device: Warp device.
     """
 
-    def __init__(
-        self, faces: np.ndarray, topology: MeshTopology, faces_device: wp.array, edges_device: wp.array,
-        device: wp.Device,
-    ) -> None:
+    def __init__(self, faces: np.ndarray, device_topology: DeviceTopology, device: wp.Device) -> None:
         self.device = device
-        vertex_bits, edge_bits = ownership_bits(faces, topology)
+        device_topology.check_same(faces, wp.get_device(device), "feature pair extraction")
+        vertex_bits, edge_bits = ownership_bits(faces, device_topology.topology)
         self.owned_vertex_bits = wp.array(vertex_bits, dtype=wp.int32, device=device)
         self.owned_edge_bits = wp.array(edge_bits, dtype=wp.int32, device=device)
-        self.face_edges = wp.array(topology.face_edges, dtype=wp.vec3i, device=device)
-        self.faces = faces_device
-        self.edges = edges_device
+        self.face_edges = device_topology.face_edges
+        self.faces = device_topology.faces
+        self.edges = device_topology.edges
         self.pair_stats = wp.zeros(3, dtype=wp.int32, device=device)
         # The host API's pair count, handed to the device path like a broad phase's counter.
         self._host_pair_count = wp.zeros(1, dtype=wp.int64, device=device)
@@ -249,8 +246,8 @@ class FeaturePairs:
 
     @property
     def device_bytes(self) -> int:
-        """Bytes held on the device (ownership tables)."""
-        return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity + self.face_edges.capacity
+        """Bytes held on the device (ownership tables; the shared topology is the caller's)."""
+        return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity
                 + self.pair_stats.capacity + self._host_pair_count.capacity)
 
     def extract_device(

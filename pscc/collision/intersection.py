@@ -56,6 +56,7 @@ import numpy as np
 import warp as wp
 
 from pscc._checks import check_object_ids, check_points
+from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import CapacityError, InputError
 from pscc.geometry.segment_triangle import segment_triangle_classify
@@ -197,6 +198,8 @@ class IntersectionCheck:
             e.g. a :class:`pscc.collision.detector.CollisionDetector`'s: its buffers are scratch between
             calls, so a simulator that checks after its broad phase's pairs were consumed saves a
             second set of hash tables. Its own pair sort and slab test are not used (no node ids).
+        device_topology: the faces' :class:`~pscc.collision.device_topology.DeviceTopology` to use instead
+            of uploading them again (e.g. the detector's), or ``None``.
 
     Raises:
         InputError: invalid faces, vertex count, object ids or options.
@@ -214,6 +217,7 @@ class IntersectionCheck:
         cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
         hit_capacity: int = 64,
         spatial_hash: SpatialHash | None = None,
+        device_topology: DeviceTopology | None = None,
     ) -> None:
         if isinstance(vertex_count, bool) or not isinstance(vertex_count, int | np.integer) or vertex_count < 0:
             raise InputError("argument", "vertex_count", f"{vertex_count!r} is not an integer >= 0",
@@ -221,7 +225,8 @@ class IntersectionCheck:
         if isinstance(hit_capacity, bool) or not isinstance(hit_capacity, int | np.integer) or hit_capacity < 1:
             raise InputError("argument", "hit_capacity", f"{hit_capacity!r} is not an integer >= 1",
                              "pass a positive integer such as 64")
-        topology = MeshTopology.from_faces(faces, int(vertex_count))
+        topology = (device_topology.topology if device_topology is not None
+                    else MeshTopology.from_faces(faces, int(vertex_count)))
         tris = np.asarray(faces).reshape(-1, 3).astype(np.int32)
         m = tris.shape[0]
         if object_ids is None:
@@ -238,9 +243,14 @@ class IntersectionCheck:
         self._edge_owner_np = owner.astype(np.int32)
 
         dev = self.device
-        self.faces = wp.array(tris, dtype=wp.vec3i, device=dev)
-        self.face_edges = wp.array(topology.face_edges.reshape(-1, 3), dtype=wp.vec3i, device=dev)
-        self.edges = wp.array(topology.edges.reshape(-1, 2), dtype=wp.vec2i, device=dev)
+        if device_topology is None:
+            device_topology = DeviceTopology.upload(tris, topology, dev)
+        device_topology.check_same(tris, dev, "intersection check")
+        self.device_topology = device_topology
+        """The faces, edges and face edges on the device (the caller's when it passed them)."""
+        self.faces = device_topology.faces
+        self.face_edges = device_topology.face_edges
+        self.edges = device_topology.edges
         self.edge_owner = wp.array(self._edge_owner_np, dtype=wp.int32, device=dev)
         self.positions = wp.empty(self.vertex_count, dtype=wp.vec3, device=dev)
         self.face_lower = wp.empty(m, dtype=wp.vec3, device=dev)

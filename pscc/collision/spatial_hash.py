@@ -66,12 +66,14 @@ again. :meth:`SpatialHash.find_pairs` is both, repeated until the buffers fit.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
 
 from pscc.collision import _spatial_hash_kernels as kernels
+from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, view
 from pscc.errors import CapacityError, InputError
 
 wp.set_module_options({"enable_backward": False})
@@ -114,19 +116,6 @@ _SCENE_CHUNKS: int = 1024
 
 _GROWTH: float = 1.25
 """Grown buffers get this factor over the exact count, so small increases do not re-grow."""
-
-
-def _aligned(size: int) -> int:
-    """``size`` bytes rounded up to 16 (the offsets of tables placed one after another)."""
-    return (int(size) + 15) // 16 * 16
-
-
-def _view(buffer: wp.array, byte_offset: int, count: int, dtype: type) -> wp.array:
-    """``count`` values of ``dtype`` starting ``byte_offset`` bytes into ``buffer``'s memory (a view:
-    ``buffer`` owns the memory, and the view keeps a reference to it)."""
-    view = wp.array(ptr=buffer.ptr + byte_offset, dtype=dtype, shape=(count,), device=buffer.device)
-    view._buffer = buffer
-    return view
 
 
 @dataclass
@@ -280,9 +269,10 @@ class SpatialHash:
         self.skip_adjacent = bool(skip_adjacent)
         m = self.face_count
         self._vertex_bound = 0
+        self._faces_given = faces is not None
         if faces is not None:
             self._check_array(faces, "faces", wp.vec3i)
-            self.faces = faces
+            self.faces = faces  # the caller's (not counted in device_bytes)
             if self.group_slab_test and m > 0:
                 # The slab test reads positions[faces]: one host read here lets every call check them.
                 self._vertex_bound = int(faces.numpy().max()) + 1
@@ -315,6 +305,8 @@ class SpatialHash:
         self.test_threads = max(1, min(DEFAULT_TEST_THREADS[kind], -(-tests_per_launch // self.tests_per_thread)))
         self.cell_bits = min(31, max(MIN_CELL_BITS, m.bit_length()))
         self._lent: wp.array | None = None
+        self._scratch_source: Callable[[], Sequence[wp.array]] | None = None
+        self._scratch_key: tuple[tuple[int, int], ...] = ()
         self._lent_names: set[str] = set()
         self._allocate_entries(max(1, 4 * m))
         capacity = 4 * m if pair_capacity is None else pair_capacity
@@ -328,47 +320,54 @@ class SpatialHash:
 
     # ------------------------------------------------------------------ buffers
 
-    def lend_scratch(self, buffer: wp.array | None) -> None:
+    def lend_scratch(self, buffer: wp.array | None,
+                     scratch: Callable[[], Sequence[wp.array]] | None = None) -> None:
         """Let the per-call tables (entries, groups, slab tables, rows and the pairs; see
-        :meth:`_place_tables`) live in ``buffer``'s memory, as many as fit, largest first; the others
-        keep buffers of their own.
+        :meth:`_place_tables`) live in lent memory, as many as fit, largest first
+        (:func:`pscc.collision.scratch.place_tables`); the others keep buffers of their own.
 
-        For a lender whose buffer holds nothing it needs from the start of a :meth:`find_pairs_device`
-        call until the caller has read that call's :attr:`pairs`, and which never reads what the hash
-        leaves there. The solver lends its BSR values: they are rewritten at the start of every
-        integration and dead from its end to the next one, the stretch in which the broad phase, the CCD
-        rounds and the intersection check hash and turn the pairs into feature pairs. Counters and stats
-        keep buffers of their own. The buffer must outlive this hash and keep its address; ``None``
-        takes the loan back. Allocates: the tables again. Capture-safe: no.
+        Args:
+            buffer: a buffer that holds nothing its lender needs from the start of a
+                :meth:`find_pairs_device` call until the caller has read that call's :attr:`pairs`, and
+                whose lender never reads what the hash leaves there. Any table may go there, the pairs
+                included. The solver lends its BSR values: they are rewritten at the start of every
+                integration and dead from its end to the next one, the stretch in which the broad phase,
+                the CCD rounds and the intersection check hash and turn the pairs into feature pairs.
+            scratch: a function giving more buffers (read at every call, as their owner may replace
+                them), dead from the start of a call until its end: every table but the pairs may go
+                there. The solver's detector lends its candidate pairs and times of impact, which the
+                broad phase rewrites from the hash's pairs and which the step reads no more once its
+                springs are built.
+
+        Counters and stats keep buffers of their own. ``None`` takes a loan back. Allocates: the tables
+        again. Capture-safe: no.
         """
-        if buffer is not None and (buffer.device != self.device or not buffer.is_contiguous):
-            raise InputError("argument", "buffer", "is not a contiguous array on the hash's device",
-                             "lend a contiguous wp.array allocated on the same device")
+        if buffer is not None:
+            check_lender(buffer, self.device, "buffer")
         self._lent = buffer
+        self._scratch_source = scratch
         self._place_tables()
 
-    def _chosen_for_loan(self, sizes: list[int]) -> set[int]:
-        """The tables (indices into ``sizes``, bytes each) to place in the lent buffer: largest first,
-        each one that still fits."""
-        if self._lent is None:
-            return set()
-        room = int(self._lent.capacity)
-        chosen = set()
-        for k in sorted(range(len(sizes)), key=lambda k: -sizes[k]):
-            if sizes[k] <= room:
-                chosen.add(k)
-                room -= sizes[k]
-        return chosen
+    def _lenders(self) -> list[Lender]:
+        """The lent buffers now: ``buffer`` first (it may hold the pairs), then the scratch buffers."""
+        lenders = [] if self._lent is None else [Lender(self._lent, holds_outputs=True)]
+        if self._scratch_source is not None:
+            for k, array in enumerate(self._scratch_source()):
+                check_lender(array, self.device, f"scratch[{k}]")
+                lenders.append(Lender(array, holds_outputs=False))
+        return lenders
 
-    def _entry_table(self, name: str, offset: int, count: int, dtype: type) -> tuple[wp.array, int]:
-        """A table of ``count`` values: a view at byte ``offset`` of the lent buffer when it fits there
-        (returns the next free offset), else an allocation of its own."""
-        lent = self._lent
-        size = count * wp.types.type_size_in_bytes(dtype)
-        if lent is not None and offset + size <= lent.capacity:
-            self._lent_names.add(name)
-            return _view(lent, offset, count, dtype), offset + _aligned(size)
-        return wp.empty(count, dtype=dtype, device=self.device), offset
+    def refresh_loans(self) -> bool:
+        """Place the tables again if a scratch lender replaced its buffers since they were placed (each
+        :meth:`find_pairs_device` call checks; a caller that resizes a lender may call it at once, so
+        that a graph recorded next allocates nothing). Returns whether they moved. Allocates: only then.
+        Capture-safe: yes while no lender changed."""
+        if self._scratch_source is None:
+            return False
+        if tuple((a.ptr, a.capacity) for a in self._scratch_source()) == self._scratch_key:
+            return False
+        self._place_tables()
+        return True
 
     def _allocate_entries(self, capacity: int) -> None:
         self.entry_capacity = capacity
@@ -399,37 +398,35 @@ class SpatialHash:
         self._place_tables()
 
     def _place_tables(self) -> None:
-        """(Re)make the per-call tables of entries, groups and rows at their capacities: in the lent
-        buffer (:meth:`lend_scratch`) while they fit, in this order, else in buffers of their own. Their
-        contents live within one call, so none is kept."""
+        """(Re)make the per-call tables of entries, groups and rows at their capacities: in lent memory
+        (:meth:`lend_scratch`) where they fit, else in buffers of their own. Their contents live within
+        one call, so none is kept; only the pairs outlive it."""
         if not hasattr(self, "slab_capacity"):
             return  # still in the constructor: placed once the group tables have a size
         n, g, slabs = self.entry_capacity, self.group_capacity, self.slab_capacity
         rows = getattr(self, "row_capacity", 1)
         # Sorting the pairs needs twice the slots (radix-sort scratch) and a key per pair.
         pair_slots = 2 * getattr(self, "pair_capacity", 1) if self.sort_pairs else getattr(self, "pair_capacity", 1)
-        tables = (("entry_key", 2 * n, wp.int64), ("entry_face", 2 * n, wp.int32), ("cell_end", n, wp.int32),
-                  ("group_end", g, wp.int32), ("group_cell", g, wp.int32), ("row_span", rows, wp.vec3i),
-                  ("row_work", rows, wp.int64), ("row_scan", rows, wp.int64), ("group_axis", slabs, wp.vec3),
-                  ("group_slab", slabs, wp.vec2), ("group_mask", slabs, wp.uint64),
-                  ("pairs", pair_slots, wp.vec2i), ("pair_keys", pair_slots if self.sort_pairs else 1, wp.int64))
-        lent = self._chosen_for_loan([_aligned(count * wp.types.type_size_in_bytes(dtype))
-                                      for _, count, dtype in tables])
-        self._lent_names = set()
-        offset = 0
-        for k, (name, count, dtype) in enumerate(tables):
-            if k in lent:
-                table, offset = self._entry_table(name, offset, count, dtype)
-            else:
-                table = wp.empty(count, dtype=dtype, device=self.device)
+        tables = [TableSpec("entry_key", 2 * n, wp.int64), TableSpec("entry_face", 2 * n, wp.int32),
+                  TableSpec("cell_end", n, wp.int32), TableSpec("group_end", g, wp.int32),
+                  TableSpec("group_cell", g, wp.int32), TableSpec("row_span", rows, wp.vec3i),
+                  TableSpec("row_work", rows, wp.int64), TableSpec("row_scan", rows, wp.int64),
+                  TableSpec("group_axis", slabs, wp.vec3), TableSpec("group_slab", slabs, wp.vec2),
+                  TableSpec("group_mask", slabs, wp.uint64), TableSpec("pairs", pair_slots, wp.vec2i, output=True),
+                  TableSpec("pair_keys", pair_slots if self.sort_pairs else 1, wp.int64)]
+        lenders = self._lenders()
+        placed, self._lent_names = place_tables(tables, lenders, self.device)
+        self._scratch_key = tuple((lender.buffer.ptr, lender.buffer.capacity)
+                                  for lender in lenders if not lender.holds_outputs)
+        for name, table in placed.items():
             setattr(self, name, table)
         # The second halves of the entry buffers are the radix sort's scratch. Everything that reads the
         # ranks and the group starts runs after the sort and within the same call, so they live there
         # (views, not allocations: 12 bytes per entry slot less).
-        self.group_rank = _view(self.entry_key, 8 * n, n, wp.int32)
-        self.cell_rank = _view(self.entry_key, 12 * n, n, wp.int32)
+        self.group_rank = view(self.entry_key, 8 * n, n, wp.int32)
+        self.cell_rank = view(self.entry_key, 12 * n, n, wp.int32)
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
-        self.group_start = _view(self.entry_face, 4 * n, n, wp.int32)
+        self.group_start = view(self.entry_face, 4 * n, n, wp.int32)
         # The rank buffers are free once the tables are written: they hold the rows per group (views made
         # here, when the tables are placed, so the device path makes none).
         self.row_count = self.group_rank[:g]
@@ -448,8 +445,9 @@ class SpatialHash:
                  "faces", "entry_key", "entry_face", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "row_span", "row_work",
                  "row_scan", "pairs", "pair_keys")
-        # Tables in a lent buffer (lend_scratch) are the lender's memory: counted as 0 here.
-        return {name: 0 if name in self._lent_names else int(getattr(self, name).capacity) for name in names}
+        # Tables in a lent buffer (lend_scratch) and faces passed in are the caller's memory: counted as 0.
+        borrowed = self._lent_names | ({"faces"} if self._faces_given else set())
+        return {name: 0 if name in borrowed else int(getattr(self, name).capacity) for name in names}
 
     # ------------------------------------------------------------------ validation
 
@@ -572,8 +570,9 @@ class SpatialHash:
         Raises:
             InputError: wrong arrays or scalar arguments.
 
-        Allocates: no. Capture-safe: yes (with the arrays of the recorded call; after
-        :meth:`check_capacity` grows a buffer, record again).
+        Allocates: no (the tables again only when a scratch lender replaced its buffers since the last
+        call: :meth:`refresh_loans`). Capture-safe: yes (with the arrays of the recorded call; after
+        :meth:`check_capacity` grows a buffer or a lender's buffers change, record again).
         """
         self._check_array(face_lower, "face_lower", wp.vec3)
         self._check_array(face_upper, "face_upper", wp.vec3)
@@ -597,6 +596,7 @@ class SpatialHash:
         self._last_call = (face_order is not None, node_limit)
         self._last_slab = bool(slab.enabled)
         self._pair_count = 0
+        self.refresh_loans()
         dev = self.device
         wp.launch(kernels._reset_counters, dim=1, outputs=[self.info, self.counts, self.grid_max], device=dev)
         if self.face_count >= 2:

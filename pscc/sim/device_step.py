@@ -10,8 +10,9 @@ every decision on the device:
    narrow phase (re-checking only pairs with a moved vertex), a one-thread decision kernel, and two
    ``wp.capture_if`` branches: the certifying broad phase once the response stops finding
    collisions, and a round of the inelastic projection while it does;
-4. the independent intersection check (a device count of crossings that involve the cloth);
-5. velocities, the DCD on the last broad phase and the proximity springs.
+4. velocities, the DCD on the last broad phase and the proximity springs;
+5. the independent intersection check (a device count of crossings that involve the cloth), last:
+   its hash tables live in the candidate pairs' memory.
 
 Everything that would make the host path halve a step or fall back to rigid impact zones, and
 every buffer that overflows, raises a flag in the :attr:`DeviceStep.report` array instead. The
@@ -378,12 +379,6 @@ class DeviceStep:
 
         wp.launch(_max_counter, dim=1, inputs=[solver.projection.constraint_count, 0, PROJECTION_PEAK],
                   outputs=[report], device=dev)
-        if solver.contact.check_intersections:
-            check = solver.intersection_check
-            check.count_device(x1, solver.cloth_face_count)
-            self._flag_intersection_overflow()
-            wp.launch(_mark_if_above, dim=1, inputs=[check.crossing_count, 0, wp.int64(0), FLAG_CROSSINGS, 1],
-                      outputs=[report], device=dev)
 
         wp.launch(_velocities_from_positions, dim=vertex_count, inputs=[x0, x1, 1.0 / dt],
                   outputs=[state_out.velocities], device=dev)
@@ -391,6 +386,14 @@ class DeviceStep:
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 0, DCD_VERTEX_FACE], outputs=[report], device=dev)
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 1, DCD_EDGE_EDGE], outputs=[report], device=dev)
         solver.proximity.update_device(contacts.args, x1)
+        # The check hashes over the candidate pairs and times of impact (lent to the detector's hash), so
+        # it runs once the springs are built from them.
+        if solver.contact.check_intersections:
+            check = solver.intersection_check
+            check.count_device(x1, solver.cloth_face_count)
+            self._flag_intersection_overflow()
+            wp.launch(_mark_if_above, dim=1, inputs=[check.crossing_count, 0, wp.int64(0), FLAG_CROSSINGS, 1],
+                      outputs=[report], device=dev)
         self._flag(springs.count, 0, springs.capacity, "contact springs")
         self._mark_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
         wp.launch(_max_counter, dim=1, inputs=[springs.count, 0, CONTACTS], outputs=[report], device=dev)
@@ -474,6 +477,7 @@ class DeviceStep:
             candidates.ensure(int(NEAR_FULL_GROWTH * candidates.capacity_vf) if report[NEAR_FULL_VERTEX_FACE] else 0,
                               int(NEAR_FULL_GROWTH * candidates.capacity_ee) if report[NEAR_FULL_EDGE_EDGE] else 0)
             solver.detector.narrow.reserve(candidates)
+            solver.detector.refresh_loans()
             grew = True
         return grew
 

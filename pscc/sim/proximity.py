@@ -45,6 +45,7 @@ from pscc.collision.contacts import (
     vertex_face_hit,
     vertex_face_vertices,
 )
+from pscc.collision.device_topology import DeviceTopology
 from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
 from pscc.mesh.topology import MeshTopology
 from pscc.sim.contact_springs import ContactSprings, MergeTable
@@ -227,22 +228,33 @@ class ProximityContacts:
         topology: the faces' :class:`pscc.mesh.topology.MeshTopology`, whose edge ids the detector's
             edge-edge rows use (built here when not given).
         merge: one spring per contact (default) or, with False, one per row.
+        device_topology: the faces' :class:`~pscc.collision.device_topology.DeviceTopology` (e.g. the
+            detector's) to share instead of uploading the faces and face edges again; its host topology
+            then stands for ``topology``.
     """
 
     def __init__(self, faces: np.ndarray, kinematic: np.ndarray, rest_gap: float, device: wp.DeviceLike,
-                 topology: MeshTopology | None = None, merge: bool = True) -> None:
+                 topology: MeshTopology | None = None, merge: bool = True,
+                 device_topology: DeviceTopology | None = None) -> None:
         self.device = wp.get_device(device)
         self.merge = bool(merge)
         """Whether the rows of one edge or corner contact become one spring (module docstring); False
         gives one spring per row, the reference the merged springs are tested against."""
         self.faces = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
         self.kinematic = np.asarray(kinematic, dtype=bool)
-        if topology is None:
+        if device_topology is not None:
+            topology = device_topology.topology
+        elif topology is None:
             topology = MeshTopology.from_faces(self.faces, self.kinematic.shape[0])
+        if device_topology is None:
+            device_topology = DeviceTopology.upload(self.faces, topology, self.device)
+        device_topology.check_same(self.faces, self.device, "contact springs")
         self._edges = np.asarray(topology.edges, dtype=np.int32).reshape(-1, 2)
-        self.faces_device = wp.array(self.faces, dtype=wp.vec3i, device=self.device)
+        self.device_topology = device_topology
+        """The collision mesh's faces, edges and face edges on the device (the caller's when it passed them)."""
+        self.faces_device = device_topology.faces
         """(m,) vec3i the collision mesh's faces (for host rows in :meth:`update`)."""
-        self.face_edges = wp.array(np.asarray(topology.face_edges, np.int32), dtype=wp.vec3i, device=self.device)
+        self.face_edges = device_topology.face_edges
         """(m,) vec3i edge ids of each face's (f0 f1), (f1 f2), (f2 f0): the edge of a vertex-edge key."""
         self.kinematic_flags = wp.array(self.kinematic.astype(np.int32), dtype=wp.int32, device=self.device)
         """(n,) int32 1 for kinematic vertices."""

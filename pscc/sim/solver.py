@@ -187,8 +187,11 @@ class ClothSolver:
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
                                           device=str(self.device))
         # The BSR values are dead from the end of one integration to the start of the next, the stretch
-        # in which the detector hashes: its per-call tables live there (SpatialHash.lend_scratch).
-        self.detector.lend_scratch(self.integrator.system.matrix.values)
+        # in which the detector hashes; the candidate pairs and times of impact are dead from the step's
+        # DCD (the springs are built from it) to the next broad phase, which rewrites them from the hash's
+        # pairs. The hash's per-call tables live there (SpatialHash.lend_scratch): so every user of the
+        # detector's hash (the intersection check too) runs after the DCD's rows are consumed.
+        self.detector.lend_scratch(self.integrator.system.matrix.values, pair_buffers=True)
         self.thickness = max(float(m.thickness) for m in materials)
         if self.thickness <= 0.0:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
@@ -199,11 +202,8 @@ class ClothSolver:
         self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
-        self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device,
-                                           topology=self.detector.topology)
         # Room for contact before it happens (the device path flags an overflow and redoes the frame).
         self.projection.reserve(self.cloth_face_count // 4)
-        self.proximity.springs.ensure(self.cloth_face_count // 4)
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
@@ -220,9 +220,17 @@ class ClothSolver:
 
         check_coordinate_range(vertices, "vertices (cloth and obstacles at t = 0)", source=scene.name)
         self.detector.prepare(vertices)
+        # One copy of the collision mesh's connectivity on the device, shared by the detector, the
+        # contact springs and the intersection check.
+        shared = self.detector.device_topology
+        self.proximity = ProximityContacts(self.collision_faces, self._kinematic, self.thickness, self.device,
+                                           device_topology=shared)
+        # Room for contact before it happens (the device path flags an overflow and redoes the frame).
+        self.proximity.springs.ensure(self.cloth_face_count // 4)
         # The check runs after the step's pairs were consumed, so it borrows the detector's hash tables.
         self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device,
-                                                    spatial_hash=getattr(self.detector, "spatial_hash", None))
+                                                    spatial_hash=getattr(self.detector, "spatial_hash", None),
+                                                    device_topology=shared)
         initial = self._cloth_crossings(vertices)
         self.initial_crossings = int(initial.shape[0])
         """Edge-face crossings of the initial state (non-zero only with ``allow_initial_intersections``)."""
@@ -265,6 +273,9 @@ class ClothSolver:
         collision = self.detector.device_bytes() if self.detector.topology is not None else {"total": 0}
         # The detector's own accounting holds its hash, which the intersection check may share.
         seen: set[int] = {id(getattr(self.detector, "spatial_hash", None))}
+        # ... and the mesh connectivity that the springs and the check share with it.
+        topology = getattr(self.detector, "device_topology", None)
+        seen.update(id(array) for array in (topology.arrays if topology is not None else ()))
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": warp_array_bytes(self.proximity, seen=seen),
@@ -533,6 +544,7 @@ class ClothSolver:
             return False
         candidates.trim(*targets)
         self.detector.narrow.reserve(candidates)
+        self.detector.refresh_loans()
         self._candidate_peaks = []
         return True
 
@@ -725,6 +737,11 @@ class ClothSolver:
             if not _finite_in_range(x1):
                 raise _StepRejected("the penetration response produced NaN, Inf or coordinates beyond MAX_COORDINATE")
 
+        # The DCD reads the candidate pairs before the intersection check hashes over their memory (lent
+        # to the detector's hash); the springs change only once the check has passed.
+        mark = time.perf_counter()
+        proximity = self.detector.narrow_phase(x1, None, self.thickness)
+        seconds["proximity"] += time.perf_counter() - mark
         if self.contact.check_intersections:
             mark = time.perf_counter()
             crossings = self._cloth_crossings(x1)
@@ -737,7 +754,6 @@ class ClothSolver:
         wp.launch(_velocities_from_positions, dim=self.model.vertex_count,
                   inputs=[state_in.positions, state_out.positions, 1.0 / dt], outputs=[state_out.velocities],
                   device=self.device)
-        proximity = self.detector.narrow_phase(x1, None, self.thickness)
         counts["dcd_vertex_face"] = int(proximity.vertex_face.shape[0])
         counts["dcd_edge_edge"] = int(proximity.edge_edge.shape[0])
         self.proximity.update(proximity.vertex_face, proximity.edge_edge, state_out.positions)

@@ -136,8 +136,8 @@ def test_hash_tables_in_a_lent_buffer_give_the_same_pairs_and_count_as_the_lende
         _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
         lent.fill_(-3.0)  # the lender's own use of its buffer between calls
     spatial_hash = detector.spatial_hash
-    assert "entry_key" in spatial_hash._lent_names
-    assert spatial_hash.entry_key.ptr == lent.ptr
+    assert {"entry_key", "pairs"} <= spatial_hash._lent_names
+    assert spatial_hash.pairs.ptr == lent.ptr  # the output first
     assert detector.device_bytes()["spatial_hash"] < own.device_bytes()["spatial_hash"]
     # A buffer too small for any table: every table is the hash's own again.
     detector.lend_scratch(wp.zeros(1, dtype=wp.float32, device="cpu"))  # 4 bytes: smaller than any table
@@ -145,3 +145,36 @@ def test_hash_tables_in_a_lent_buffer_give_the_same_pairs_and_count_as_the_lende
     _same(detector.detect(mesh.vertices, mesh.vertices_end), expected)
     detector.lend_scratch(None)
     assert detector.device_bytes()["spatial_hash"] == own.device_bytes()["spatial_hash"]
+
+
+def test_hash_tables_in_the_detectors_pair_buffers_give_the_same_pairs_after_they_are_resized() -> None:
+    # With pair_buffers the hash also places its tables in the candidate pairs and times of impact, which
+    # the broad phase rewrites after the hash (the pairs themselves never go there).
+    mesh = folded_sheet(800, layers=3, seed=11)
+    reference = CollisionDetector(mesh.faces, device="cpu")
+    detector = CollisionDetector(mesh.faces, device="cpu")
+    detector.prepare(mesh.vertices)
+    detector.lend_scratch(None, pair_buffers=True)
+    spatial_hash = detector.spatial_hash
+    pair_buffers = lambda: [detector.candidates.edge_edge, detector.candidates.vertex_face,  # noqa: E731
+                            detector.narrow.edge_edge_toi, detector.narrow.vertex_face_toi]
+
+    def inside(name: str) -> bool:
+        table = getattr(spatial_hash, name)
+        return any(b.ptr <= table.ptr and table.ptr + table.capacity <= b.ptr + b.capacity for b in pair_buffers())
+
+    for positions, end in ((mesh.vertices, mesh.vertices_end), (mesh.vertices_end, None), (mesh.vertices, None)):
+        _same(detector.detect(positions, end, 0.01), reference.detect(positions, end, 0.01))
+        assert spatial_hash._lent_names and all(inside(name) for name in spatial_hash._lent_names)
+        assert "pairs" not in spatial_hash._lent_names  # no buffer that may hold the output was lent
+    # The candidates grow (a new buffer): the next call places the tables in the new buffers.
+    old = detector.candidates.edge_edge
+    detector.candidates.ensure(0, 3 * detector.candidates.capacity_ee)
+    detector.narrow.reserve(detector.candidates)
+    assert detector.candidates.edge_edge.ptr != old.ptr
+    _same(detector.detect(mesh.vertices, mesh.vertices_end), reference.detect(mesh.vertices, mesh.vertices_end))
+    assert all(inside(name) for name in spatial_hash._lent_names)
+    assert spatial_hash.entry_key.ptr == detector.candidates.edge_edge.ptr  # the largest table, the largest lender
+    assert not spatial_hash.refresh_loans()  # nothing changed since
+    # Counted once: as candidates, not again as hash tables.
+    assert detector.device_bytes()["spatial_hash"] < reference.device_bytes()["spatial_hash"]

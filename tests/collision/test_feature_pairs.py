@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs, ownership_bits
 from pscc.mesh import MeshTopology, grid_sheet
 
@@ -18,8 +19,7 @@ def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: st
     """Extract with the supporting-plane test; all-zero positions make every plane degenerate (no pair
     is separated), so every triangle pair is kept."""
     topology = MeshTopology.from_faces(faces, vertex_count)
-    extractor = FeaturePairs(faces, topology, wp.array(faces, dtype=wp.vec3i, device=device),
-                             wp.array(topology.edges, dtype=wp.vec2i, device=device), wp.get_device(device))
+    extractor = FeaturePairs(faces, DeviceTopology.upload(faces, topology, device), wp.get_device(device))
     candidates = CandidatePairs(1, 1, wp.get_device(device))
     triangle_pairs = wp.array(pairs.reshape(-1, 2).astype(np.int32), dtype=wp.vec2i, device=device)
     x = np.zeros((vertex_count, 3), np.float32) if positions is None else positions

@@ -19,6 +19,7 @@ from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.brute_force import BroadPhaseBruteForce
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.contacts import ContactArgs, edge_edge_hit, vertex_face_hit
+from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.narrow_phase import NarrowPhase
 from pscc.mesh import MeshTopology, folded_sheet, grid_sheet
@@ -131,7 +132,7 @@ def _padded_pairs(scene: Scene) -> tuple[wp.array, wp.array]:
 
 
 def _extractor(scene: Scene) -> FeaturePairs:
-    return FeaturePairs(scene.faces, scene.topology, scene.faces_device, scene.edges_device, scene.device)
+    return FeaturePairs(scene.faces, DeviceTopology.upload(scene.faces, scene.topology, scene.device), scene.device)
 
 
 def _host_path(scene: Scene) -> dict[str, np.ndarray]:

@@ -13,6 +13,7 @@ import dataclasses
 import ipctk
 import numpy as np
 import pytest
+import warp as wp
 
 from pscc.errors import InputError
 from pscc.scenes import build_scene
@@ -372,7 +373,7 @@ def test_object_ids_that_do_not_fit_int32_are_refused_naming_the_scene() -> None
         ClothSolver(bad, device="cpu")
 
 
-def test_the_detectors_hash_tables_live_in_the_bsr_values_between_integrations() -> None:
+def test_the_detectors_hash_tables_live_in_the_bsr_values_and_the_pair_buffers_between_their_uses() -> None:
     scene = build_scene("drape", 400)
     solver = ClothSolver(scene, device="cpu")
     state, scratch = solver.initial_state(), solver.initial_state()
@@ -382,7 +383,24 @@ def test_the_detectors_hash_tables_live_in_the_bsr_values_between_integrations()
     for _ in range(3):
         solver.advance_frame(state, scratch, scene.time_step, 4)
         without.advance_frame(other, other_scratch, scene.time_step, 4)
-    assert solver.detector.spatial_hash.entry_key.ptr == solver.integrator.system.matrix.values.ptr
+    # Every per-call table lives in the BSR values or in the candidate pairs and times of impact (the
+    # pairs, which the broad phase turns into candidates, only in the values).
+    spatial_hash, detector = solver.detector.spatial_hash, solver.detector
+    values = solver.integrator.system.matrix.values
+    pair_buffers = [detector.candidates.edge_edge, detector.candidates.vertex_face,
+                    detector.narrow.edge_edge_toi, detector.narrow.vertex_face_toi]
+
+    def lender(name: str) -> wp.array | None:
+        table = getattr(spatial_hash, name)
+        for buffer in [values, *pair_buffers]:
+            if buffer.ptr <= table.ptr and table.ptr + table.capacity <= buffer.ptr + buffer.capacity:
+                return buffer
+        return None
+
+    assert "pairs" in spatial_hash._lent_names and len(spatial_hash._lent_names) >= 8
+    assert all(lender(name) is not None for name in spatial_hash._lent_names)
+    assert lender("pairs") is values
+    assert any(lender(name) is not values for name in spatial_hash._lent_names)
     # Sharing the memory changes nothing: the same frames, bit for bit, and less memory.
     np.testing.assert_array_equal(state.positions.numpy(), other.positions.numpy())
     assert solver.device_bytes()["collision"] < without.device_bytes()["collision"]
