@@ -35,12 +35,14 @@ producer runs again. Nothing overflows silently. The count lives on the device o
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
 import warp as wp
 
 from pscc._checks import as_numpy
+from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables
 from pscc.errors import CapacityError, InputError
 
 MAX_CAPACITY: int = 2**31 - 1
@@ -85,10 +87,8 @@ class ContactSprings:
         """(capacity,) vec3 unit normals of each contact."""
         self.multiplicity = wp.ones(max(1, int(capacity)), dtype=wp.int32, device=self.device)
         """(capacity,) int32 pair rows each contact stands for (the factor on its stiffness)."""
-        self.merge_keys = wp.full(max(1, int(capacity)), -1, dtype=wp.int64, device=self.device)
-        """(capacity,) int64 the merge table's keys (:meth:`merge_table`)."""
-        self.merge_counts = wp.zeros(max(1, int(capacity)), dtype=wp.int32, device=self.device)
-        """(capacity,) int32 the merge table's counts."""
+        self._merge_lender: weakref.ref[wp.array] | None = None
+        self._place_merge_table(max(1, int(capacity)))
         self.count = wp.zeros(1, dtype=wp.int32, device=self.device)
         """(1,) int32 number of contacts stored (may exceed capacity after an overflowing append)."""
 
@@ -96,6 +96,32 @@ class ContactSprings:
     def capacity(self) -> int:
         """Number of contact slots."""
         return int(self.vertices.shape[0])
+
+    def lend_merge_table(self, buffer: wp.array | None) -> None:
+        """Let the merge table (:attr:`merge_keys`, :attr:`merge_counts`: 12 bytes per slot) live in
+        ``buffer``'s memory when it fits there, for a lender whose buffer holds nothing it needs while a
+        producer merges (the solver lends its BSR values, dead from the end of one integration to the start
+        of the next, when the springs are built). ``None`` takes the loan back. The table then counts as
+        the lender's memory (:attr:`merge_table_lent`). Allocates: the table again. Capture-safe: no."""
+        if buffer is not None:
+            check_lender(buffer, self.device, "buffer")
+        # A weak reference: the lender owns (and counts) the buffer; the views placed in it keep it alive.
+        self._merge_lender = weakref.ref(buffer) if buffer is not None else None
+        self._place_merge_table(self.capacity)
+
+    def _place_merge_table(self, size: int) -> None:
+        """(Re)make the merge table for ``size`` slots: in the lent buffer when it fits, else its own.
+        It holds nothing between producer runs (each run clears it first)."""
+        tables = [TableSpec("merge_keys", size, wp.int64), TableSpec("merge_counts", size, wp.int32)]
+        lender = self._merge_lender() if self._merge_lender is not None else None
+        lenders = [Lender(lender)] if lender is not None else []
+        placed, lent = place_tables(tables, lenders, self.device)
+        self.merge_keys = placed["merge_keys"]
+        """(capacity,) int64 the merge table's keys (:meth:`merge_table`)."""
+        self.merge_counts = placed["merge_counts"]
+        """(capacity,) int32 the merge table's counts."""
+        self.merge_table_lent: set[str] = lent
+        """Names of the merge table's arrays that live in lent memory (the lender's to count)."""
 
     def merge_table(self) -> MergeTable:
         """The hash table (one slot per contact slot) a producer merges the rows of one contact with.
@@ -226,9 +252,8 @@ class ContactSprings:
         self.weights = self._resized(self.weights, size)
         self.normals = self._resized(self.normals, size)
         self.multiplicity = self._resized(self.multiplicity, size)
-        # The merge table holds nothing between producer runs: new, empty.
-        self.merge_keys = wp.full(size, -1, dtype=wp.int64, device=self.device)
-        self.merge_counts = wp.zeros(size, dtype=wp.int32, device=self.device)
+        # The merge table holds nothing between producer runs: placed anew.
+        self._place_merge_table(size)
 
     def _resized(self, old: wp.array, size: int) -> wp.array:
         new = wp.zeros(size, dtype=old.dtype, device=self.device)

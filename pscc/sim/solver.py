@@ -227,6 +227,9 @@ class ClothSolver:
                                            device_topology=shared)
         # Room for contact before it happens (the device path flags an overflow and redoes the frame).
         self.proximity.springs.ensure(self.cloth_face_count // 4)
+        # The springs are built after the integration, when the BSR values are dead: their merge table
+        # lives there (ContactSprings.lend_merge_table).
+        self.proximity.springs.lend_merge_table(self.integrator.system.matrix.values)
         # The check runs after the step's pairs were consumed, so it borrows the detector's hash tables.
         self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device,
                                                     spatial_hash=getattr(self.detector, "spatial_hash", None),
@@ -276,6 +279,9 @@ class ClothSolver:
         # ... and the mesh connectivity that the springs and the check share with it.
         topology = getattr(self.detector, "device_topology", None)
         seen.update(id(array) for array in (topology.arrays if topology is not None else ()))
+        # ... and the springs' merge table where it lives in the BSR values (the integrator's).
+        springs = self.proximity.springs
+        seen.update(id(getattr(springs, name)) for name in springs.merge_table_lent)
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": warp_array_bytes(self.proximity, seen=seen),

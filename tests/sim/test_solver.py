@@ -404,3 +404,26 @@ def test_the_detectors_hash_tables_live_in_the_bsr_values_and_the_pair_buffers_b
     # Sharing the memory changes nothing: the same frames, bit for bit, and less memory.
     np.testing.assert_array_equal(state.positions.numpy(), other.positions.numpy())
     assert solver.device_bytes()["collision"] < without.device_bytes()["collision"]
+
+
+def test_the_springs_merge_table_lives_in_the_bsr_values_with_the_same_frames() -> None:
+    # The springs are built after the integration, when the BSR values are dead.
+    scene = build_scene("stack", 400)
+    solver = ClothSolver(scene, device="cpu")
+    without = ClothSolver(scene, device="cpu")
+    without.proximity.springs.lend_merge_table(None)
+    states = [(s.initial_state(), s.initial_state()) for s in (solver, without)]
+    for _ in range(3):
+        for s, (state, scratch) in zip((solver, without), states, strict=True):
+            s.advance_frame(state, scratch, scene.time_step, 4)
+    springs = solver.proximity.springs
+    values = solver.integrator.system.matrix.values
+    assert springs.merge_table_lent == {"merge_keys", "merge_counts"}
+    assert values.ptr <= springs.merge_keys.ptr < values.ptr + values.capacity
+    assert not without.proximity.springs.merge_table_lent
+    assert springs.host_count > 0 and springs.host_count == without.proximity.springs.host_count
+    np.testing.assert_array_equal(springs.multiplicity.numpy(), without.proximity.springs.multiplicity.numpy())
+    np.testing.assert_array_equal(states[0][0].positions.numpy(), states[1][0].positions.numpy())
+    # Counted once, as the integrator's.
+    assert solver.device_bytes()["contact_springs"] < without.device_bytes()["contact_springs"]
+    assert solver.device_bytes()["integrator"] == without.device_bytes()["integrator"]
