@@ -182,58 +182,85 @@ def _add_counter(
     report[slot] = report[slot] + source[source_index]
 
 
-@wp.kernel
-def _max_counter(
-    # in:
-    source: wp.array(dtype=Any),
-    source_index: int,
-    slot: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: report[slot] = max(report[slot], source[source_index]) (an int32 or int64 counter,
-    clamped to int32)."""
-    value = wp.min(wp.int64(source[source_index]), wp.int64(2147483647))
-    report[slot] = wp.max(report[slot], wp.int32(value))
+@wp.func
+def _max_into(value: wp.int64, slot: int, report: wp.array(dtype=wp.int32)):
+    """report[slot] = max(report[slot], value) (clamped to int32)."""
+    report[slot] = wp.max(report[slot], wp.int32(wp.min(value, wp.int64(2147483647))))
 
 
-@wp.kernel
-def _mark_if_above(
-    # in:
-    count: wp.array(dtype=Any),
-    index: int,
-    limit: wp.int64,
-    slot: int,
-    mask: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: set the bits ``mask`` of report[slot] when count[index] (int32 or int64) exceeds ``limit``."""
-    if wp.int64(count[index]) > limit:
+@wp.func
+def _mark_into(value: wp.int64, limit: wp.int64, slot: int, mask: int, report: wp.array(dtype=wp.int32)):
+    """Set the bits ``mask`` of report[slot] when ``value`` exceeds ``limit``."""
+    if value > limit:
         report[slot] = report[slot] | mask
 
 
-@wp.kernel
-def _flag_if_above(
-    # in:
-    count: wp.array(dtype=Any),
-    index: int,
-    capacity: wp.int64,
-    code: int,
-    # out:
-    report: wp.array(dtype=wp.int32),
-):
-    """One thread: set FLAG_OVERFLOW to ``code`` when count[index] (int32 or int64) exceeds ``capacity`` or
-    wrapped negative, unless an earlier overflow is already recorded (the first one is the cause)."""
-    c = wp.int64(count[index])
-    if (c > capacity or c < wp.int64(0)) and report[FLAG_OVERFLOW] == 0:
+@wp.func
+def _flag_into(value: wp.int64, capacity: wp.int64, code: int, report: wp.array(dtype=wp.int32)):
+    """Set FLAG_OVERFLOW to ``code`` when ``value`` exceeds ``capacity`` or wrapped negative, unless an
+    earlier overflow is already recorded (the first one is the cause)."""
+    if (value > capacity or value < wp.int64(0)) and report[FLAG_OVERFLOW] == 0:
         report[FLAG_OVERFLOW] = code
 
 
-# Explicit overloads: the CUDA ahead-of-time compile sees both counter types.
-for _kernel in (_max_counter, _mark_if_above, _flag_if_above):
-    for _dtype in (wp.int32, wp.int64):
-        wp.overload(_kernel, {"count" if _kernel is not _max_counter else "source": wp.array(dtype=_dtype)})
+# One kernel per counter type, not one generic kernel with overloads: Warp 1.19's CPU graphs replayed a
+# launch of the int32 overload with the int64 one in some recorded frames (it read an int32 counter and the
+# next one as a single int64 and raised a false overflow), so the recorded code picks the kernel itself.
+@wp.kernel
+def _max_counter_int32(source: wp.array(dtype=wp.int32), source_index: int, slot: int,
+                       report: wp.array(dtype=wp.int32)):
+    """One thread: report[slot] = max(report[slot], source[source_index])."""
+    _max_into(wp.int64(source[source_index]), slot, report)
+
+
+@wp.kernel
+def _max_counter_int64(source: wp.array(dtype=wp.int64), source_index: int, slot: int,
+                       report: wp.array(dtype=wp.int32)):
+    """One thread: report[slot] = max(report[slot], source[source_index]) (clamped to int32)."""
+    _max_into(source[source_index], slot, report)
+
+
+@wp.kernel
+def _mark_if_above_int32(count: wp.array(dtype=wp.int32), index: int, limit: wp.int64, slot: int, mask: int,
+                         report: wp.array(dtype=wp.int32)):
+    """One thread: set the bits ``mask`` of report[slot] when count[index] exceeds ``limit``."""
+    _mark_into(wp.int64(count[index]), limit, slot, mask, report)
+
+
+@wp.kernel
+def _mark_if_above_int64(count: wp.array(dtype=wp.int64), index: int, limit: wp.int64, slot: int, mask: int,
+                         report: wp.array(dtype=wp.int32)):
+    """One thread: set the bits ``mask`` of report[slot] when count[index] exceeds ``limit``."""
+    _mark_into(count[index], limit, slot, mask, report)
+
+
+@wp.kernel
+def _flag_if_above_int32(count: wp.array(dtype=wp.int32), index: int, capacity: wp.int64, code: int,
+                         report: wp.array(dtype=wp.int32)):
+    """One thread: :func:`_flag_into` on count[index]."""
+    _flag_into(wp.int64(count[index]), capacity, code, report)
+
+
+@wp.kernel
+def _flag_if_above_int64(count: wp.array(dtype=wp.int64), index: int, capacity: wp.int64, code: int,
+                         report: wp.array(dtype=wp.int32)):
+    """One thread: :func:`_flag_into` on count[index]."""
+    _flag_into(count[index], capacity, code, report)
+
+
+_MAX_COUNTER = {wp.int32: _max_counter_int32, wp.int64: _max_counter_int64}
+_MARK_IF_ABOVE = {wp.int32: _mark_if_above_int32, wp.int64: _mark_if_above_int64}
+_FLAG_IF_ABOVE = {wp.int32: _flag_if_above_int32, wp.int64: _flag_if_above_int64}
+
+
+def _max_counter(source: wp.array) -> wp.Kernel:
+    """The report-max kernel for ``source``'s counter type (int32 or int64)."""
+    return _MAX_COUNTER[source.dtype]
+
+
+def _mark_if_above(count: wp.array) -> wp.Kernel:
+    """The mark-if-above kernel for ``count``'s counter type (int32 or int64)."""
+    return _MARK_IF_ABOVE[count.dtype]
 
 
 @wp.kernel
@@ -265,7 +292,8 @@ def flag_overflow(count: wp.array, index: int, capacity: int, report: wp.array, 
 
     Allocates: no. Capture-safe: yes.
     """
-    wp.launch(_flag_if_above, dim=1, inputs=[count, int(index), wp.int64(int(capacity)), int(code)], outputs=[report],
+    wp.launch(_FLAG_IF_ABOVE[count.dtype], dim=1, inputs=[count, int(index), wp.int64(int(capacity)), int(code)],
+              outputs=[report],
               device=report.device)
 
 
@@ -377,8 +405,9 @@ class DeviceStep:
                                                    self._project, report], device=dev)
         wp.capture_while(self._running, lambda: self._response_round(x0, x1))
 
-        wp.launch(_max_counter, dim=1, inputs=[solver.projection.constraint_count, 0, PROJECTION_PEAK],
-                  outputs=[report], device=dev)
+        constraints = solver.projection.constraint_count
+        wp.launch(_max_counter(constraints), dim=1, inputs=[constraints, 0, PROJECTION_PEAK], outputs=[report],
+                  device=dev)
 
         wp.launch(_velocities_from_positions, dim=vertex_count, inputs=[x0, x1, 1.0 / dt],
                   outputs=[state_out.velocities], device=dev)
@@ -386,20 +415,22 @@ class DeviceStep:
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 0, DCD_VERTEX_FACE], outputs=[report], device=dev)
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 1, DCD_EDGE_EDGE], outputs=[report], device=dev)
         solver.proximity.update_device(contacts.args, x1)
+        self._flag(springs.count, 0, springs.capacity, "contact springs")
+        self._mark_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
+        wp.launch(_max_counter(springs.count), dim=1, inputs=[springs.count, 0, CONTACTS], outputs=[report], device=dev)
         # The check hashes over the candidate pairs and times of impact (lent to the detector's hash), so
         # it runs once the springs are built from them.
         if solver.contact.check_intersections:
             check = solver.intersection_check
             check.count_device(x1, solver.cloth_face_count)
             self._flag_intersection_overflow()
-            wp.launch(_mark_if_above, dim=1, inputs=[check.crossing_count, 0, wp.int64(0), FLAG_CROSSINGS, 1],
+            crossings = check.crossing_count
+            wp.launch(_mark_if_above(crossings), dim=1, inputs=[crossings, 0, wp.int64(0), FLAG_CROSSINGS, 1],
                       outputs=[report], device=dev)
-        self._flag(springs.count, 0, springs.capacity, "contact springs")
-        self._mark_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
-        wp.launch(_max_counter, dim=1, inputs=[springs.count, 0, CONTACTS], outputs=[report], device=dev)
         front_count = detector.front_count()
         if front_count is not None:
-            wp.launch(_max_counter, dim=1, inputs=[front_count, 0, FRONT_SIZE], outputs=[report], device=dev)
+            wp.launch(_max_counter(front_count), dim=1, inputs=[front_count, 0, FRONT_SIZE], outputs=[report],
+                      device=dev)
 
     def _response_round(self, x0: wp.array, x1: wp.array) -> None:
         """The body of the CCD / response loop (recorded once, replayed per round)."""
@@ -438,13 +469,13 @@ class DeviceStep:
     def _track_hash_peak(self, count: wp.array, index: int, capacity: int, k: int) -> None:
         if k == 4 and capacity >= 2**30 - 1:  # not a slab-testing call: its groups are not slab groups
             return
-        wp.launch(_max_counter, dim=1, inputs=[count, index, HASH_PEAKS + k], outputs=[self.report],
+        wp.launch(_max_counter(count), dim=1, inputs=[count, index, HASH_PEAKS + k], outputs=[self.report],
                   device=self.device)
 
     def _mark_near_full(self, count: wp.array, index: int, capacity: int, slot: int, bit: int = 0) -> None:
         """Set bit ``bit`` of report[slot] when the counter passes :data:`NEAR_FULL_FRACTION` of ``capacity``."""
         limit = wp.int64(int(NEAR_FULL_FRACTION * capacity))
-        wp.launch(_mark_if_above, dim=1, inputs=[count, index, limit, slot, 1 << bit], outputs=[self.report],
+        wp.launch(_mark_if_above(count), dim=1, inputs=[count, index, limit, slot, 1 << bit], outputs=[self.report],
                   device=self.device)
 
     def grow_near_full(self, report: np.ndarray) -> bool:
@@ -494,8 +525,8 @@ class DeviceStep:
         self._mark_near_full(candidates.counts, 0, candidates.capacity_vf, NEAR_FULL_VERTEX_FACE)
         self._mark_near_full(candidates.counts, 1, candidates.capacity_ee, NEAR_FULL_EDGE_EDGE)
         for k in range(2):
-            wp.launch(_max_counter, dim=1, inputs=[candidates.counts, k, CANDIDATE_PEAKS + k], outputs=[self.report],
-                      device=self.device)
+            wp.launch(_max_counter(candidates.counts), dim=1, inputs=[candidates.counts, k, CANDIDATE_PEAKS + k],
+                      outputs=[self.report], device=self.device)
         for k, (count, index, capacity) in enumerate(detector.overflow_counters()):
             self._flag(count, index, capacity, f"broad phase counter {k}")
             if k < 5 and capacity > 0:  # the growing hash buffers: entries, groups, rows, pairs, slabs

@@ -200,3 +200,16 @@ def test_a_device_that_cannot_record_the_frame_runs_it_eagerly(monkeypatch: pyte
     assert all(f["counts"]["graph_replays"] + f["counts"]["graph_recordings"] == 0 for f in sim.frame_stats)
     for a, b in zip(refused, eager, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_recorded_frames_raise_no_false_overflow_on_a_contact_rich_scene() -> None:
+    # Regression: with one generic report kernel overloaded for int32 and int64 counters, Warp's CPU graph
+    # replayed a launch on an int32 counter with the int64 overload in `stack` at 2K triangles (the frame
+    # that recorded the graph after the contact built up fell back with a false candidate overflow).
+    sim = Simulation(build_scene("stack", 2000), device="cpu")
+    for _ in range(7):
+        sim.step_frame()
+    late = list(sim.frame_stats[3:])
+    assert [f["counts"]["device_fallbacks"] for f in late] == [0] * len(late), [f.get("fallback_reason") for f in late]
+    assert sum(f["counts"]["graph_recordings"] for f in late) >= 1
+    assert sum(f["counts"]["graph_replays"] for f in late) >= 2
