@@ -212,6 +212,7 @@ class CollisionDetector:
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
                                          self._rigid_objects)
             self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)
+            self.front.lend_scratch(self._front_scratch_source())
 
     def _positions(self, value: Any, name: str) -> np.ndarray:
         points = check_points(value, name, shape_tail=(3,))
@@ -643,7 +644,8 @@ class CollisionDetector:
 
     def lend_scratch(self, buffer: wp.array | None, *, pair_buffers: bool = False) -> None:
         """Lend the spatial hash memory for its per-call tables (:meth:`SpatialHash.lend_scratch`, whose
-        contract the lender keeps). Methods without a hash ignore it.
+        contract the lender keeps), and the normal cone front for its own
+        (:meth:`~pscc.collision.front.NormalConeFront.lend_scratch`). Methods without them ignore it.
 
         Args:
             buffer: a buffer of the caller's, dead while this detector runs (``None``: none).
@@ -652,12 +654,23 @@ class CollisionDetector:
                 the next call of this detector *or of anything sharing its hash*, e.g. an
                 :class:`~pscc.collision.intersection.IntersectionCheck`: the hash writes over them.
 
-        Allocates: the hash's tables again. Capture-safe: no.
+        Allocates: the hash's and the front's tables again. Capture-safe: no.
         """
         self._lent_scratch = buffer
         self._lend_pair_buffers = bool(pair_buffers)
         if getattr(self, "spatial_hash", None) is not None:
             self.spatial_hash.lend_scratch(buffer, self._scratch_source())
+        if getattr(self, "front", None) is not None:
+            self.front.lend_scratch(self._front_scratch_source())
+
+    def _front_scratch_source(self) -> Callable[[], list[wp.array]] | None:
+        """Everything lent to this detector, for the normal cone front's per-call tables: the front is
+        updated at the start of the broad phase, before the hash (NormalConeFront.lend_scratch)."""
+        pair_buffers = self._scratch_source()
+        if self._lent_scratch is None and pair_buffers is None:
+            return None
+        lent = [] if self._lent_scratch is None else [self._lent_scratch]
+        return lambda: lent + (pair_buffers() if pair_buffers is not None else [])
 
     def _scratch_source(self) -> Callable[[], list[wp.array]] | None:
         """The candidate and time-of-impact buffers as they are now (they are replaced when they grow or

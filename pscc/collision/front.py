@@ -47,6 +47,7 @@ nodes are distinct), so no buffer of the front can overflow.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -72,6 +73,7 @@ from pscc.collision._front_kernels import (
     _write_sort_keys,
 )
 from pscc.collision.bvh import MaterialBvh
+from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables
 from pscc.errors import InputError
 from pscc.geometry import normal_cone as nc
 
@@ -106,26 +108,18 @@ class NormalConeFront:
         device = self.device
         self.shrink_interval = max(1, int(shrink_interval))
         n = bvh.node_count
-        self.node_mask = wp.zeros(n, dtype=nc.mask_type, device=device)
-        self.node_normal = wp.zeros(n, dtype=wp.vec3, device=device)
         self.front = wp.zeros(n, dtype=wp.int32, device=device)
         self.front_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.calls = wp.zeros(1, dtype=wp.int64, device=device)
-        self._front_next = wp.zeros(n, dtype=wp.int32, device=device)
-        # A frontier holds distinct nodes, so never more than the tree has.
-        self._frontier = wp.zeros(n, dtype=wp.int32, device=device)
-        self._frontier_next = wp.zeros(n, dtype=wp.int32, device=device)
         self._frontier_count = wp.zeros(1, dtype=wp.int32, device=device)
-        self._keep = wp.zeros(n + 1, dtype=wp.int32, device=device)
-        self._split = wp.zeros(n + 1, dtype=wp.int32, device=device)
-        self._keep_offsets = wp.zeros(n + 1, dtype=wp.int32, device=device)
-        self._split_offsets = wp.zeros(n + 1, dtype=wp.int32, device=device)
-        # Sorted at capacity (N slots, the unused ones padded to sort last); radix sort needs twice that.
-        self._sort_keys = wp.zeros(2 * n, dtype=wp.int32, device=device)
-        self._sort_values = wp.zeros(2 * n, dtype=wp.int32, device=device)
+        # The per-call tables (node masks and normals, frontiers, flags, scans, sort buffers): in lent
+        # memory when lend_scratch() gives some, else buffers of their own.
+        self._scratch_source: Callable[[], Sequence[wp.array]] | None = None
+        self._scratch_key: tuple[tuple[int, int], ...] = ()
+        self._placements = 0
+        self._lent_names: set[str] = set()
+        self._place_scratch()
         self._sort_bits = max(1, int(bvh.face_count).bit_length())
-        self.in_front = wp.zeros(n + 1, dtype=wp.int32, device=device)
-        self._marked = wp.zeros(n + 1, dtype=wp.int32, device=device)
         self._lifted = wp.zeros(1, dtype=wp.int32, device=device)
         self._counters = wp.zeros(4, dtype=wp.int32, device=device)
         self.node_id = wp.zeros(bvh.face_count, dtype=wp.int32, device=device)
@@ -146,6 +140,62 @@ class NormalConeFront:
         self.args.node_normal = self.node_normal
         self.args.margin = tolerances.NORMAL_CONE_MARGIN
         self.args.degenerate_ratio = tolerances.DEGENERATE_FACE_RATIO
+
+    # --- lent memory ---------------------------------------------------------------------------
+
+    def lend_scratch(self, source: Callable[[], Sequence[wp.array]] | None) -> None:
+        """Let the per-call tables (:meth:`_scratch_tables`: node masks and normals, frontiers, flags,
+        scans and the sort buffers, which :meth:`update` fills before it reads them) live in the buffers
+        ``source()`` gives, where they fit (:func:`pscc.collision.scratch.place_tables`); the front, its
+        counters and :attr:`node_id` keep buffers of their own.
+
+        For buffers that hold nothing their owner needs while :meth:`update` runs and whose owner never
+        reads what it leaves there. ``source`` is called at every update (the owner may replace its
+        buffers; the tables move with them). The detector lends what it lends its spatial hash: the
+        front is updated at the start of the broad phase, before the hash. ``None`` takes the loan back.
+        Allocates: the tables again. Capture-safe: no.
+        """
+        self._scratch_source = source
+        self._place_scratch()
+
+    def _scratch_tables(self) -> list[TableSpec]:
+        n = self.bvh.node_count
+        return [TableSpec("node_mask", n, nc.mask_type), TableSpec("node_normal", n, wp.vec3),
+                TableSpec("_front_next", n, wp.int32), TableSpec("_frontier", n, wp.int32),
+                TableSpec("_frontier_next", n, wp.int32), TableSpec("_keep", n + 1, wp.int32),
+                TableSpec("_split", n + 1, wp.int32), TableSpec("_keep_offsets", n + 1, wp.int32),
+                TableSpec("_split_offsets", n + 1, wp.int32), TableSpec("in_front", n + 1, wp.int32),
+                TableSpec("_marked", n + 1, wp.int32),
+                # Sorted at capacity (N slots, the unused ones padded to sort last); radix sort needs twice that.
+                TableSpec("_sort_keys", 2 * n, wp.int32), TableSpec("_sort_values", 2 * n, wp.int32)]
+
+    def _lenders(self) -> list[Lender]:
+        if self._scratch_source is None:
+            return []
+        lenders = []
+        for k, array in enumerate(self._scratch_source()):
+            check_lender(array, self.device, f"scratch[{k}]")
+            lenders.append(Lender(array, holds_outputs=False))
+        return lenders
+
+    def _place_scratch(self) -> None:
+        """(Re)make the per-call tables; the launches are recorded again at the next update."""
+        lenders = self._lenders()
+        placed, self._lent_names = place_tables(self._scratch_tables(), lenders, self.device)
+        for name, table in placed.items():
+            setattr(self, name, table)
+        self._scratch_key = tuple((lender.buffer.ptr, lender.buffer.capacity) for lender in lenders)
+        self._placements += 1
+        if hasattr(self, "args"):
+            self.args.node_mask = self.node_mask
+            self.args.node_normal = self.node_normal
+
+    def _refresh_scratch(self) -> None:
+        """Place the tables again when a lender replaced its buffers since they were placed."""
+        if self._scratch_source is None:
+            return
+        if tuple((a.ptr, a.capacity) for a in self._scratch_source()) != self._scratch_key:
+            self._place_scratch()
 
     # --- sync points ---------------------------------------------------------------------------
 
@@ -183,10 +233,10 @@ class NormalConeFront:
 
         Allocates: no. Capture-safe: yes (reads no device data).
         """
-        arrays = (self.node_mask, self.node_normal, self.front, self.front_count, self.calls, self._front_next,
-                  self._frontier, self._frontier_next, self._frontier_count, self._keep, self._split,
-                  self._keep_offsets, self._split_offsets, self._sort_keys, self._sort_values, self.in_front,
-                  self._marked, self._lifted, self._counters, self.node_id, self.directions, self.direction_table)
+        arrays = [self.front, self.front_count, self.calls, self._frontier_count, self._lifted, self._counters,
+                  self.node_id, self.directions, self.direction_table]
+        # Tables in lent memory (lend_scratch) are the lenders' to count.
+        arrays += [getattr(self, t.name) for t in self._scratch_tables() if t.name not in self._lent_names]
         return sum(a.capacity for a in arrays)
 
     def state_dict(self) -> dict[str, np.ndarray]:
@@ -251,6 +301,7 @@ class NormalConeFront:
 
         Allocates: no. Capture-safe: yes (capture after a first call with the same arrays).
         """
+        self._refresh_scratch()
         self._record_launches(positions_t0, positions_t1)
         launches = self._launches
         for launch in self._refit_launches:
@@ -291,7 +342,7 @@ class NormalConeFront:
         the same every call while those arrays are), which saves their argument packing per call."""
         swept = 1 if positions_t1 is not None else 0
         positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
-        key = (positions_t0.ptr, positions_t1.ptr, swept, self.shrink_interval)
+        key = (positions_t0.ptr, positions_t1.ptr, swept, self.shrink_interval, self._placements)
         if key == self._launch_key:
             return
         args = self.args

@@ -200,6 +200,9 @@ class IntersectionCheck:
             second set of hash tables. Its own pair sort and slab test are not used (no node ids).
         device_topology: the faces' :class:`~pscc.collision.device_topology.DeviceTopology` to use instead
             of uploading them again (e.g. the detector's), or ``None``.
+        face_boxes: two (face_count,) ``wp.vec3`` buffers for the face boxes, lent by a caller that needs
+            nothing in them while the check runs and never reads what it leaves (e.g. the detector's
+            face boxes, which its next broad phase computes anew), or ``None`` (buffers of its own).
 
     Raises:
         InputError: invalid faces, vertex count, object ids or options.
@@ -218,6 +221,7 @@ class IntersectionCheck:
         hit_capacity: int = 64,
         spatial_hash: SpatialHash | None = None,
         device_topology: DeviceTopology | None = None,
+        face_boxes: tuple[wp.array, wp.array] | None = None,
     ) -> None:
         if isinstance(vertex_count, bool) or not isinstance(vertex_count, int | np.integer) or vertex_count < 0:
             raise InputError("argument", "vertex_count", f"{vertex_count!r} is not an integer >= 0",
@@ -253,8 +257,13 @@ class IntersectionCheck:
         self.edges = device_topology.edges
         self.edge_owner = wp.array(self._edge_owner_np, dtype=wp.int32, device=dev)
         self.positions = wp.empty(self.vertex_count, dtype=wp.vec3, device=dev)
-        self.face_lower = wp.empty(m, dtype=wp.vec3, device=dev)
-        self.face_upper = wp.empty(m, dtype=wp.vec3, device=dev)
+        if face_boxes is None:
+            face_boxes = (wp.empty(m, dtype=wp.vec3, device=dev), wp.empty(m, dtype=wp.vec3, device=dev))
+        for k, box in enumerate(face_boxes):
+            if not isinstance(box, wp.array) or box.dtype != wp.vec3 or box.shape != (m,) or box.device != dev:
+                raise InputError("argument", f"face_boxes[{k}]", "is not a (face_count,) wp.vec3 array on the check's "
+                                 "device", "lend two face box buffers of the same mesh, or None")
+        self.face_lower, self.face_upper = face_boxes
         self.hit_count = wp.zeros(1, dtype=wp.int64, device=dev)
         self.crossing_count = wp.zeros(1, dtype=wp.int32, device=dev)
         self._topology = EdgeTopologyArgs()

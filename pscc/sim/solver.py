@@ -230,10 +230,13 @@ class ClothSolver:
         # The springs are built after the integration, when the BSR values are dead: their merge table
         # lives there (ContactSprings.lend_merge_table).
         self.proximity.springs.lend_merge_table(self.integrator.system.matrix.values)
-        # The check runs after the step's pairs were consumed, so it borrows the detector's hash tables.
+        # The check runs after the step's pairs were consumed, so it borrows the detector's hash tables, and
+        # its face boxes (computed anew by every broad phase).
         self.intersection_check = IntersectionCheck(self.collision_faces, n, self.device,
                                                     spatial_hash=getattr(self.detector, "spatial_hash", None),
-                                                    device_topology=shared)
+                                                    device_topology=shared,
+                                                    face_boxes=(self.detector.boxes.face_lower,
+                                                                self.detector.boxes.face_upper))
         initial = self._cloth_crossings(vertices)
         self.initial_crossings = int(initial.shape[0])
         """Edge-face crossings of the initial state (non-zero only with ``allow_initial_intersections``)."""
@@ -282,6 +285,8 @@ class ClothSolver:
         # ... and the springs' merge table where it lives in the BSR values (the integrator's).
         springs = self.proximity.springs
         seen.update(id(getattr(springs, name)) for name in springs.merge_table_lent)
+        # ... and the intersection check's face boxes, the detector's.
+        seen.update({id(self.detector.boxes.face_lower), id(self.detector.boxes.face_upper)})
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": warp_array_bytes(self.proximity, seen=seen),

@@ -230,3 +230,27 @@ def test_largest_front_fills_the_buffers(device: str) -> None:
         assert np.array_equal(node_id, expected_node_id) and front.stats == expected_stats
         sizes.append(front.front_size)
     assert sizes[0] == leaves.size and sizes[1] < leaves.size // 4, "leaves stay leaves; flat: shrunk"
+
+
+def test_per_call_tables_in_lent_memory_give_the_same_fronts_and_follow_a_replaced_lender(device: str) -> None:
+    # The detector lends the front what it lends its hash: whatever the lender writes between calls is
+    # rewritten by the next update before it is read.
+    _, faces, mesh, own = _setup(device, shrink_interval=2)
+    lent = NormalConeFront(own.bvh, faces, device, 2)
+    buffers = [wp.zeros(8 * own.bvh.node_count, dtype=wp.vec3, device=device)]  # room for every table
+    lent.lend_scratch(lambda: buffers)
+    assert {"node_mask", "_sort_keys", "_frontier"} <= lent._lent_names
+    assert lent.device_bytes < own.device_bytes
+    for step, (s, noise) in enumerate(_CYCLE):
+        x0, x1 = _positions(mesh, s, noise, seed=step)
+        p0 = wp.array(x0, dtype=wp.vec3, device=device)
+        p1 = wp.array(x1, dtype=wp.vec3, device=device) if step % 2 else None
+        np.testing.assert_array_equal(lent.update(p0, p1).numpy(), own.update(p0, p1).numpy(), f"call {step}")
+        assert lent.front.numpy()[: lent.front_size].tolist() == own.front.numpy()[: own.front_size].tolist()
+        buffers[0].fill_(wp.vec3(-1.0e30, 7.0, -3.0))  # the lender's own use between calls
+        if step == 4:
+            buffers[0] = wp.zeros(8 * own.bvh.node_count, dtype=wp.vec3, device=device)  # the lender regrows
+    start = buffers[0].ptr
+    assert start <= lent.node_mask.ptr < start + buffers[0].capacity, "the tables moved to the new buffer"
+    lent.lend_scratch(None)
+    assert not lent._lent_names and lent.device_bytes == own.device_bytes
