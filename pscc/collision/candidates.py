@@ -5,6 +5,7 @@ buffer                  shape, dtype            meaning
 ======================  ======================  ==============================================
 vertex_face             (capacity_vf,) vec2i    (vertex id, face id)
 edge_edge               (capacity_ee,) vec2i    (edge id a, edge id b), a < b
+storage                 (both,) vec2i           the one allocation the two above are views of
 counts                  (2,) int32              pairs appended: [vertex-face, edge-edge]; may
                                                 exceed the capacities (an overflow)
 ======================  ======================  ==============================================
@@ -24,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from pscc.collision.scratch import view
 from pscc.errors import CapacityError
 
 wp.set_module_options({"enable_backward": False})
@@ -60,13 +62,22 @@ class CandidatePairs:
 
     def __init__(self, capacity_vf: int, capacity_ee: int, device: wp.Device) -> None:
         self.device = device
-        self.vertex_face = wp.empty(max(1, capacity_vf), dtype=wp.vec2i, device=device)
-        self.edge_edge = wp.empty(max(1, capacity_ee), dtype=wp.vec2i, device=device)
+        self._allocate(max(1, int(capacity_vf)), max(1, int(capacity_ee)))
         self.counts = wp.zeros(2, dtype=wp.int32, device=device)
         self._host_counts = np.zeros(2, dtype=np.int64)
         self.initial_capacities = (max(1, int(capacity_vf)), max(1, int(capacity_ee)))
         """The slots the buffers were made with: room for contact before it happens, which
         :meth:`trim` does not go below."""
+
+    def _allocate(self, capacity_vf: int, capacity_ee: int) -> None:
+        """One buffer for both kinds (contents not kept): :attr:`vertex_face` and :attr:`edge_edge` are
+        views of its two parts, so the memory is one block a simulator can lend out between uses."""
+        self.storage = wp.empty(capacity_vf + capacity_ee, dtype=wp.vec2i, device=self.device)
+        """(capacity_vf + capacity_ee,) vec2i the memory of both kinds of pairs."""
+        # Views made from the address (scratch.view), not slices: with slices of the storage, a CPU graph
+        # recorded right after the storage was replaced held no operations (Warp 1.19).
+        self.vertex_face = view(self.storage, 0, capacity_vf, wp.vec2i)
+        self.edge_edge = view(self.storage, 8 * capacity_vf, capacity_ee, wp.vec2i)
 
     @property
     def capacity_vf(self) -> int:
@@ -81,7 +92,7 @@ class CandidatePairs:
     @property
     def device_bytes(self) -> int:
         """Bytes held on the device."""
-        return self.vertex_face.capacity + self.edge_edge.capacity + self.counts.capacity
+        return self.storage.capacity + self.counts.capacity
 
     def reset(self) -> None:
         """Zero both counters. Allocates: no. Capture-safe: yes."""
@@ -91,8 +102,8 @@ class CandidatePairs:
         """Sync point: read the counters to the host and grow the buffers that overflowed.
 
         Afterwards :attr:`vertex_face_count` and :attr:`edge_edge_count` hold the counts read. A grown
-        buffer is replaced by a new one (``GROWTH`` x the count, plus ``GROWTH_MARGIN``); its contents
-        are not kept.
+        buffer is replaced by a new one (``GROWTH`` x the count, plus ``GROWTH_MARGIN``; both kinds share
+        one allocation, so both are new); their contents are not kept.
 
         Returns:
             True when every pair found was stored; False when a buffer was grown, in which case
@@ -107,24 +118,21 @@ class CandidatePairs:
         if np.any(counts < 0):
             raise CapacityError("candidate counter overflowed int32; reduce the thickness or split the scene")
         self._host_counts = counts
-        fits = True
-        if counts[0] > self.capacity_vf:
-            self.vertex_face = self._grown(counts[0], "vertex_face")
-            fits = False
-        if counts[1] > self.capacity_ee:
-            self.edge_edge = self._grown(counts[1], "edge_edge")
-            fits = False
+        fits = bool(counts[0] <= self.capacity_vf and counts[1] <= self.capacity_ee)
+        if not fits:
+            self.ensure(int(counts[0]), int(counts[1]))
         return fits
 
     def ensure(self, capacity_vf: int, capacity_ee: int) -> None:
-        """Grow the buffers (contents are not kept) to hold at least the given numbers of pairs.
+        """Grow the buffers (contents are not kept, of either kind) to hold at least the given numbers of
+        pairs.
 
         Allocates: only when a buffer is too small. Capture-safe: no.
         """
-        if capacity_vf > self.capacity_vf:
-            self.vertex_face = self._grown(capacity_vf, "vertex_face")
-        if capacity_ee > self.capacity_ee:
-            self.edge_edge = self._grown(capacity_ee, "edge_edge")
+        if capacity_vf > self.capacity_vf or capacity_ee > self.capacity_ee:
+            vf = self._grown(capacity_vf, "vertex_face") if capacity_vf > self.capacity_vf else self.capacity_vf
+            ee = self._grown(capacity_ee, "edge_edge") if capacity_ee > self.capacity_ee else self.capacity_ee
+            self._allocate(vf, ee)
 
     def trim(self, capacity_vf: int, capacity_ee: int) -> None:
         """Shrink the buffers (contents are not kept) that are larger than the given numbers of pairs, but
@@ -135,10 +143,8 @@ class CandidatePairs:
         """
         capacity_vf = max(int(capacity_vf), self.initial_capacities[0])
         capacity_ee = max(int(capacity_ee), self.initial_capacities[1])
-        if capacity_vf < self.capacity_vf:
-            self.vertex_face = wp.empty(capacity_vf, dtype=wp.vec2i, device=self.device)
-        if capacity_ee < self.capacity_ee:
-            self.edge_edge = wp.empty(capacity_ee, dtype=wp.vec2i, device=self.device)
+        if capacity_vf < self.capacity_vf or capacity_ee < self.capacity_ee:
+            self._allocate(min(capacity_vf, self.capacity_vf), min(capacity_ee, self.capacity_ee))
 
     @property
     def vertex_face_count(self) -> int:
@@ -150,11 +156,10 @@ class CandidatePairs:
         """Edge-edge pairs found by the last run, as read by the last :meth:`fits` (host value)."""
         return int(self._host_counts[1])
 
-    def _grown(self, needed: int, name: str) -> wp.array:
+    def _grown(self, needed: int, name: str) -> int:
         if needed > MAX_CAPACITY:
             raise CapacityError(
                 f"{name} candidate buffer: {needed} pairs exceed {MAX_CAPACITY}; "
                 "reduce the thickness or split the scene"
             )
-        size = min(MAX_CAPACITY, int(needed * GROWTH) + GROWTH_MARGIN)
-        return wp.empty(size, dtype=wp.vec2i, device=self.device)
+        return min(MAX_CAPACITY, int(needed * GROWTH) + GROWTH_MARGIN)

@@ -677,15 +677,16 @@ class CollisionDetector:
         shrink), for the hash to place tables in; ``None`` unless :meth:`lend_scratch` asked for it."""
         if not self._lend_pair_buffers:
             return None
-        return lambda: [self.candidates.edge_edge, self.candidates.vertex_face,
-                        self.narrow.edge_edge_toi, self.narrow.vertex_face_toi]
+        return lambda: [self.candidates.storage, self.narrow.toi_storage]
 
     def refresh_loans(self) -> None:
-        """Place the hash's tables again after the candidate buffers were resized
-        (:meth:`SpatialHash.refresh_loans`), so that a graph recorded next allocates nothing. Allocates:
-        only then. Capture-safe: no."""
+        """Place the hash's and the front's tables again after the candidate buffers were resized
+        (:meth:`SpatialHash.refresh_loans`, :meth:`NormalConeFront.refresh_loans`), so that a graph
+        recorded next allocates and records nothing. Allocates: only then. Capture-safe: no."""
         if getattr(self, "spatial_hash", None) is not None:
             self.spatial_hash.refresh_loans()
+        if getattr(self, "front", None) is not None:
+            self.front.refresh_loans()
 
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``."""

@@ -117,6 +117,7 @@ class NormalConeFront:
         self._scratch_source: Callable[[], Sequence[wp.array]] | None = None
         self._scratch_key: tuple[tuple[int, int], ...] = ()
         self._placements = 0
+        self._last_positions: tuple[wp.array, wp.array | None] | None = None
         self._lent_names: set[str] = set()
         self._place_scratch()
         self._sort_bits = max(1, int(bvh.face_count).bit_length())
@@ -190,12 +191,16 @@ class NormalConeFront:
             self.args.node_mask = self.node_mask
             self.args.node_normal = self.node_normal
 
-    def _refresh_scratch(self) -> None:
-        """Place the tables again when a lender replaced its buffers since they were placed."""
+    def refresh_loans(self) -> None:
+        """Place the tables again when a lender replaced its buffers since they were placed (every
+        :meth:`update` checks; a caller that resized a lender may call it at once, so that a graph recorded
+        next records nothing again). Allocates: only then. Capture-safe: yes while no lender changed."""
         if self._scratch_source is None:
             return
         if tuple((a.ptr, a.capacity) for a in self._scratch_source()) != self._scratch_key:
             self._place_scratch()
+            if self._last_positions is not None:  # record the launches on the new tables now
+                self._record_launches(*self._last_positions)
 
     # --- sync points ---------------------------------------------------------------------------
 
@@ -301,7 +306,7 @@ class NormalConeFront:
 
         Allocates: no. Capture-safe: yes (capture after a first call with the same arrays).
         """
-        self._refresh_scratch()
+        self.refresh_loans()
         self._record_launches(positions_t0, positions_t1)
         launches = self._launches
         for launch in self._refit_launches:
@@ -340,6 +345,7 @@ class NormalConeFront:
     def _record_launches(self, positions_t0: wp.array, positions_t1: wp.array | None) -> None:
         """Record every launch of :meth:`update` once per set of position arrays (the arguments are
         the same every call while those arrays are), which saves their argument packing per call."""
+        self._last_positions = (positions_t0, positions_t1)
         swept = 1 if positions_t1 is not None else 0
         positions_t1 = positions_t1 if positions_t1 is not None else positions_t0
         key = (positions_t0.ptr, positions_t1.ptr, swept, self.shrink_interval, self._placements)

@@ -35,7 +35,6 @@ faces                    (m,) vec3i            vertex ids of each face
 face_edges               (m,) vec3i            edge ids of (v0, v1), (v1, v2), (v2, v0)
 edges                    (E,) vec2i            edge vertex ids ``[a, b]``, ``a < b``, sorted
 edge_owner               (E,) int32            lowest face id containing the edge
-positions                (n,) vec3             copy of NumPy positions passed to ``find``
 face_lower / face_upper  (m,) vec3             exact face boxes
 hits                     (H,) vec2i            reported (edge id, face id), unsorted
 hit_kind / hit_bound     (H,) int32 / float32  1 certain crossing, 2 near; distance bound Delta
@@ -256,7 +255,6 @@ class IntersectionCheck:
         self.face_edges = device_topology.face_edges
         self.edges = device_topology.edges
         self.edge_owner = wp.array(self._edge_owner_np, dtype=wp.int32, device=dev)
-        self.positions = wp.empty(self.vertex_count, dtype=wp.vec3, device=dev)
         if face_boxes is None:
             face_boxes = (wp.empty(m, dtype=wp.vec3, device=dev), wp.empty(m, dtype=wp.vec3, device=dev))
         for k, box in enumerate(face_boxes):
@@ -309,9 +307,8 @@ class IntersectionCheck:
         if host.shape[0] != n:
             raise InputError("argument", "positions", f"{host.shape[0]} rows for {n} vertices",
                              f"pass ({n}, 3) positions")
-        if n:
-            self.positions.assign(host)
-        return self.positions
+        # A copy for this call only (the host API allocates anyway; device callers pass their own array).
+        return wp.array(host.reshape(-1, 3), dtype=wp.vec3, device=self.device)
 
     def overflow_counters(self) -> list[tuple[wp.array, int, int]]:
         """``(device counter, index, capacity)`` triples of the last :meth:`count_device`: a counter

@@ -11,6 +11,7 @@ buffer                  shape, dtype           meaning
 vertex_face_toi         (capacity_vf,) f32     time of impact per vertex-face candidate; > 1 =
                                                no contact (``pscc.geometry.ccd.NO_HIT``)
 edge_edge_toi           (capacity_ee,) f32     likewise per edge-edge candidate
+toi_storage             (both,) f32            the one allocation the two above are views of
 hit_counts              (2,) int32             valid rows with toi <= 1 after the last run:
                                                [vertex-face, edge-edge]
 moved                   (vertex_count,) int32  per-vertex marks of the CCD re-check
@@ -30,6 +31,7 @@ import warp as wp
 
 from pscc.collision.candidates import CandidatePairs, valid_rows
 from pscc.collision.contacts import ContactArgs, DeviceContacts
+from pscc.collision.scratch import view
 from pscc.geometry import distance_tolerances
 from pscc.geometry.ccd import CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
 from pscc.geometry.distance import edge_edge_distance_squared, vertex_face_distance_squared
@@ -277,8 +279,7 @@ class NarrowPhase:
         self.edges = edges
         self.params = ccd_parameters()
         self.proximity = proximity_parameters()
-        self.vertex_face_toi = wp.empty(1, dtype=wp.float32, device=device)
-        self.edge_edge_toi = wp.empty(1, dtype=wp.float32, device=device)
+        self._allocate_toi(1, 1)
         self.hit_counts = wp.zeros(2, dtype=wp.int32, device=device)
         self._no_marks = wp.zeros(1, dtype=wp.int32, device=device)
         self.moved = wp.zeros(0, dtype=wp.int32, device=device)
@@ -288,7 +289,7 @@ class NarrowPhase:
     @property
     def device_bytes(self) -> int:
         """Bytes held on the device."""
-        return (self.vertex_face_toi.capacity + self.edge_edge_toi.capacity + self.moved.capacity
+        return (self.toi_storage.capacity + self.moved.capacity
                 + self.hit_counts.capacity)
 
     def reserve(self, candidates: CandidatePairs) -> None:
@@ -298,10 +299,18 @@ class NarrowPhase:
         :meth:`CandidatePairs.trim` (which may resize the candidates) and before :meth:`run_device`.
         Allocates: only when the candidate buffers were resized. Capture-safe: no.
         """
-        if self.vertex_face_toi.shape[0] != candidates.capacity_vf:
-            self.vertex_face_toi = wp.empty(candidates.capacity_vf, dtype=wp.float32, device=self.device)
-        if self.edge_edge_toi.shape[0] != candidates.capacity_ee:
-            self.edge_edge_toi = wp.empty(candidates.capacity_ee, dtype=wp.float32, device=self.device)
+        if (self.vertex_face_toi.shape[0], self.edge_edge_toi.shape[0]) != (candidates.capacity_vf,
+                                                                             candidates.capacity_ee):
+            self._allocate_toi(candidates.capacity_vf, candidates.capacity_ee)
+
+    def _allocate_toi(self, capacity_vf: int, capacity_ee: int) -> None:
+        """One buffer for both kinds of times of impact (contents not kept; a block a simulator can lend
+        out between uses): :attr:`vertex_face_toi` and :attr:`edge_edge_toi` are views of its parts."""
+        self.toi_storage = wp.empty(capacity_vf + capacity_ee, dtype=wp.float32, device=self.device)
+        # Views made from the address (scratch.view), not slices: with slices of the storage, a CPU graph
+        # recorded right after the storage was replaced held no operations (Warp 1.19).
+        self.vertex_face_toi = view(self.toi_storage, 0, capacity_vf, wp.float32)
+        self.edge_edge_toi = view(self.toi_storage, 4 * capacity_vf, capacity_ee, wp.float32)
 
     def mark_moved(self, old_t0: wp.array, new_t0: wp.array, old_t1: wp.array, new_t1: wp.array) -> wp.array:
         """Per-vertex int32 marks (``self.moved``): 1 where the start or end position changed.

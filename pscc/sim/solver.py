@@ -594,6 +594,9 @@ class ClothSolver:
             wp.capture_launch(self._frame_graph[1])
             return "replayed"
         if graph and self._frame_graph_warm == key and self.graph_unavailable is None:
+            # Tables in lent memory follow a lender that was resized since the warm frame: move them now,
+            # not while recording (nothing may be allocated or recorded again inside the capture).
+            self.detector.refresh_loans()
             try:
                 with wp.ScopedCapture(device=self.device) as capture:
                     self._launch_frame(runner, state, scratch, dt, steps)

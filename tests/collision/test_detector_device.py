@@ -156,8 +156,7 @@ def test_hash_tables_in_the_detectors_pair_buffers_give_the_same_pairs_after_the
     detector.prepare(mesh.vertices)
     detector.lend_scratch(None, pair_buffers=True)
     spatial_hash = detector.spatial_hash
-    pair_buffers = lambda: [detector.candidates.edge_edge, detector.candidates.vertex_face,  # noqa: E731
-                            detector.narrow.edge_edge_toi, detector.narrow.vertex_face_toi]
+    pair_buffers = lambda: [detector.candidates.storage, detector.narrow.toi_storage]  # noqa: E731
 
     def inside(name: str) -> bool:
         table = getattr(spatial_hash, name)
@@ -168,13 +167,13 @@ def test_hash_tables_in_the_detectors_pair_buffers_give_the_same_pairs_after_the
         assert spatial_hash._lent_names and all(inside(name) for name in spatial_hash._lent_names)
         assert "pairs" not in spatial_hash._lent_names  # no buffer that may hold the output was lent
     # The candidates grow (a new buffer): the next call places the tables in the new buffers.
-    old = detector.candidates.edge_edge
+    old = detector.candidates.storage
     detector.candidates.ensure(0, 3 * detector.candidates.capacity_ee)
     detector.narrow.reserve(detector.candidates)
-    assert detector.candidates.edge_edge.ptr != old.ptr
+    assert detector.candidates.storage.ptr != old.ptr
     _same(detector.detect(mesh.vertices, mesh.vertices_end), reference.detect(mesh.vertices, mesh.vertices_end))
     assert all(inside(name) for name in spatial_hash._lent_names)
-    assert spatial_hash.entry_key.ptr == detector.candidates.edge_edge.ptr  # the largest table, the largest lender
+    assert spatial_hash.entry_key.ptr == detector.candidates.storage.ptr  # the largest table, the largest lender
     assert not spatial_hash.refresh_loans()  # nothing changed since
     # Counted once: as candidates, not again as hash tables.
     assert detector.device_bytes()["spatial_hash"] < reference.device_bytes()["spatial_hash"]

@@ -387,8 +387,7 @@ def test_the_detectors_hash_tables_live_in_the_bsr_values_and_the_pair_buffers_b
     # pairs, which the broad phase turns into candidates, only in the values).
     spatial_hash, detector = solver.detector.spatial_hash, solver.detector
     values = solver.integrator.system.matrix.values
-    pair_buffers = [detector.candidates.edge_edge, detector.candidates.vertex_face,
-                    detector.narrow.edge_edge_toi, detector.narrow.vertex_face_toi]
+    pair_buffers = [detector.candidates.storage, detector.narrow.toi_storage]
 
     def lender(name: str) -> wp.array | None:
         table = getattr(spatial_hash, name)
@@ -397,7 +396,7 @@ def test_the_detectors_hash_tables_live_in_the_bsr_values_and_the_pair_buffers_b
                 return buffer
         return None
 
-    assert "pairs" in spatial_hash._lent_names and len(spatial_hash._lent_names) >= 8
+    assert "pairs" in spatial_hash._lent_names and len(spatial_hash._lent_names) >= 5
     assert all(lender(name) is not None for name in spatial_hash._lent_names)
     assert lender("pairs") is values
     assert any(lender(name) is not values for name in spatial_hash._lent_names)
