@@ -73,7 +73,7 @@ from pscc.collision._front_kernels import (
     _write_sort_keys,
 )
 from pscc.collision.bvh import MaterialBvh
-from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables
+from pscc.collision.scratch import TableSpec, place_tables, scratch_lenders
 from pscc.errors import InputError
 from pscc.geometry import normal_cone as nc
 
@@ -170,18 +170,9 @@ class NormalConeFront:
                 # Sorted at capacity (N slots, the unused ones padded to sort last); radix sort needs twice that.
                 TableSpec("_sort_keys", 2 * n, wp.int32), TableSpec("_sort_values", 2 * n, wp.int32)]
 
-    def _lenders(self) -> list[Lender]:
-        if self._scratch_source is None:
-            return []
-        lenders = []
-        for k, array in enumerate(self._scratch_source()):
-            check_lender(array, self.device, f"scratch[{k}]")
-            lenders.append(Lender(array, holds_outputs=False))
-        return lenders
-
     def _place_scratch(self) -> None:
         """(Re)make the per-call tables; the launches are recorded again at the next update."""
-        lenders = self._lenders()
+        lenders = scratch_lenders(self._scratch_source, self.device)
         placed, self._lent_names = place_tables(self._scratch_tables(), lenders, self.device)
         for name, table in placed.items():
             setattr(self, name, table)

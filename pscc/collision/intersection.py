@@ -444,7 +444,8 @@ class IntersectionCheck:
             InputError: wrong shape, dtype or device, NaN or Inf.
             CapacityError: more hits than int32 slots.
 
-        Allocates: when the hit buffer or the spatial hash grows, and the host result. Capture-safe: no.
+        Allocates: when the hit buffer or the spatial hash grows, the host result, and a device copy of
+        host positions. Capture-safe: no.
         """
         count = self._run(positions)
         if count == 0:
@@ -490,7 +491,8 @@ class IntersectionCheck:
             InputError: invalid positions.
             CapacityError: more hits than int32 slots.
 
-        Allocates: when the hit buffer or the spatial hash grows. Capture-safe: no.
+        Allocates: when the hit buffer or the spatial hash grows, and a device copy of host positions.
+        Capture-safe: no.
         """
         count = self._run(positions)
         self._kinds = np.zeros(0, dtype=np.int32)

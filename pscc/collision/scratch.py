@@ -13,7 +13,7 @@ borrower's call until the borrower's outputs have been read.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import warp as wp
@@ -72,6 +72,21 @@ def check_lender(buffer: wp.array, device: wp.Device, name: str) -> None:
     if not isinstance(buffer, wp.array) or buffer.device != device or not buffer.is_contiguous:
         raise InputError("argument", name, "is not a contiguous wp.array on the borrower's device",
                          "lend a contiguous wp.array allocated on the same device")
+
+
+def scratch_lenders(source: Callable[[], Sequence[wp.array]] | None, device: wp.Device) -> list[Lender]:
+    """The buffers ``source()`` gives now (checked), as lenders that hold no outputs; none without a
+    source. Borrowers call the source again whenever they place tables: owners replace buffers that grow."""
+    if source is None:
+        return []
+    if not callable(source):
+        raise InputError("argument", "scratch", f"got {type(source).__name__}, not a function",
+                         "pass a function that returns the lent wp.arrays, or None")
+    lenders = []
+    for k, array in enumerate(source()):
+        check_lender(array, device, f"scratch[{k}]")
+        lenders.append(Lender(array, holds_outputs=False))
+    return lenders
 
 
 def place_tables(tables: Sequence[TableSpec], lenders: Sequence[Lender],

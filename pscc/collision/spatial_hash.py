@@ -73,7 +73,7 @@ import numpy as np
 import warp as wp
 
 from pscc.collision import _spatial_hash_kernels as kernels
-from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, view
+from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.errors import CapacityError, InputError
 
 wp.set_module_options({"enable_backward": False})
@@ -323,8 +323,8 @@ class SpatialHash:
     def lend_scratch(self, buffer: wp.array | None,
                      scratch: Callable[[], Sequence[wp.array]] | None = None) -> None:
         """Let the per-call tables (entries, groups, slab tables, rows and the pairs; see
-        :meth:`_place_tables`) live in lent memory, as many as fit, largest first
-        (:func:`pscc.collision.scratch.place_tables`); the others keep buffers of their own.
+        :meth:`_place_tables`) live in lent memory, as many as fit (:func:`pscc.collision.scratch.place_tables`:
+        the pairs first, then the largest tables); the others keep buffers of their own.
 
         Args:
             buffer: a buffer that holds nothing its lender needs from the start of a
@@ -351,11 +351,7 @@ class SpatialHash:
     def _lenders(self) -> list[Lender]:
         """The lent buffers now: ``buffer`` first (it may hold the pairs), then the scratch buffers."""
         lenders = [] if self._lent is None else [Lender(self._lent, holds_outputs=True)]
-        if self._scratch_source is not None:
-            for k, array in enumerate(self._scratch_source()):
-                check_lender(array, self.device, f"scratch[{k}]")
-                lenders.append(Lender(array, holds_outputs=False))
-        return lenders
+        return lenders + scratch_lenders(self._scratch_source, self.device)
 
     def refresh_loans(self) -> bool:
         """Place the tables again if a scratch lender replaced its buffers since they were placed (each

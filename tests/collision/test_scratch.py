@@ -8,7 +8,7 @@ import warp as wp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pscc.collision.scratch import ALIGNMENT, Lender, TableSpec, check_lender, place_tables
+from pscc.collision.scratch import ALIGNMENT, Lender, TableSpec, check_lender, place_tables, scratch_lenders
 from pscc.errors import InputError
 
 DTYPES = [wp.int32, wp.int64, wp.vec2i, wp.vec3, wp.float32]
@@ -65,3 +65,7 @@ def test_a_lender_on_another_device_or_not_contiguous_is_refused() -> None:
         check_lender(wp.zeros((4, 4), dtype=wp.float32, device="cpu")[:, 1], wp.get_device("cpu"), "scratch")
     with pytest.raises(InputError, match="scratch"):
         check_lender(np.zeros(4), wp.get_device("cpu"), "scratch")
+    with pytest.raises(InputError, match="scratch: got list, not a function"):
+        scratch_lenders([wp.zeros(4, device="cpu")], wp.get_device("cpu"))
+    with pytest.raises(InputError, match=r"scratch\[1\]: is not a contiguous"):
+        scratch_lenders(lambda: [wp.zeros(4, device="cpu"), np.zeros(4)], wp.get_device("cpu"))
