@@ -257,6 +257,9 @@ class IntersectionCheck:
         self.edge_owner = wp.array(self._edge_owner_np, dtype=wp.int32, device=dev)
         if face_boxes is None:
             face_boxes = (wp.empty(m, dtype=wp.vec3, device=dev), wp.empty(m, dtype=wp.vec3, device=dev))
+        if not isinstance(face_boxes, tuple | list) or len(face_boxes) != 2:
+            raise InputError("argument", "face_boxes", f"got {type(face_boxes).__name__}, not two arrays",
+                             "pass (lower, upper) face box buffers, or None")
         for k, box in enumerate(face_boxes):
             if not isinstance(box, wp.array) or box.dtype != wp.vec3 or box.shape != (m,) or box.device != dev:
                 raise InputError("argument", f"face_boxes[{k}]", "is not a (face_count,) wp.vec3 array on the check's "

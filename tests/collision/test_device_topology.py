@@ -45,6 +45,8 @@ def test_a_topology_of_other_faces_or_another_device_is_refused() -> None:
     topology = DeviceTopology.upload(faces, MeshTopology.from_faces(faces, 4), "cpu")
     with pytest.raises(InputError, match="device_topology: holds other faces"):
         IntersectionCheck(other, 4, "cpu", device_topology=topology)
+    with pytest.raises(InputError, match="face_boxes: got array, not two arrays"):
+        IntersectionCheck(faces, 4, "cpu", face_boxes=wp.empty(2, dtype=wp.vec3))
     with pytest.raises(InputError, match=r"face_boxes\[1\]"):
         IntersectionCheck(faces, 4, "cpu", face_boxes=(wp.empty(2, dtype=wp.vec3), wp.empty(3, dtype=wp.vec3)))
     with pytest.raises(InputError, match="device_topology: holds other faces"):
