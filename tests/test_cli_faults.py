@@ -334,11 +334,13 @@ def test_a_run_that_fails_later_keeps_its_frames_and_status(tmp_path: Path, monk
 
 def test_ctrl_c_exits_130_with_one_line_and_the_run_resumes(tmp_path: Path) -> None:
     out = tmp_path / "r"
-    args = ["simulate", "twist", "--frames", "30", *SMALL, "--checkpoint-every", "3", "--out-dir", str(out)]
+    # Enough frames after the one awaited that the run cannot finish before the signal lands, even when
+    # the machine is busy (a 100-triangle frame takes a few hundredths of a second).
+    args = ["simulate", "twist", "--frames", "60", *SMALL, "--checkpoint-every", "3", "--out-dir", str(out)]
     process = subprocess.Popen([sys.executable, "-m", "pscc", *args], stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 240
-    while not (out / "frames" / "frame_00007.npz").exists():
+    while not (out / "frames" / "frame_00004.npz").exists():
         assert process.poll() is None, process.stderr.read()
         assert time.monotonic() < deadline
         time.sleep(0.02)
@@ -350,7 +352,7 @@ def test_ctrl_c_exits_130_with_one_line_and_the_run_resumes(tmp_path: Path) -> N
     run = json.loads((out / "run.json").read_text())
     assert run["status"] == "interrupted" and run["checkpoint"] % 3 == 0
     assert main([*args, "--resume"]) == 0
-    assert len(list((out / "frames").glob("frame_*.npz"))) == 31
+    assert len(list((out / "frames").glob("frame_*.npz"))) == 61
 
 
 def test_keyboard_interrupt_before_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
@@ -552,7 +554,8 @@ def test_absurd_scene_numbers_are_refused_by_key_without_warnings(tmp_path: Path
 
 def test_sigterm_stops_the_run_like_ctrl_c(tmp_path: Path) -> None:
     out = tmp_path / "r"
-    process = subprocess.Popen([sys.executable, "-m", "pscc", "simulate", "twist", "--frames", "40", *SMALL,
+    # Far more frames than reach the signal: the run must not finish first on a busy machine.
+    process = subprocess.Popen([sys.executable, "-m", "pscc", "simulate", "twist", "--frames", "400", *SMALL,
                                 "--checkpoint-every", "2", "--out-dir", str(out)], stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 240
