@@ -11,7 +11,17 @@ with every point taken at time t. The pair comes within distance ``d_min`` at ti
 |F(t, u, v)| <= d_min for some admissible (u, v). F is linear in each parameter separately, so over
 a box of parameters its values lie in the bounding box of its 8 corner values.
 
-**Motion-bound filter.** Before any search, a pair is excluded when its distance at t0, bounded
+**Swept-box filter.** First of all, a pair is excluded when the bounding boxes of its two features'
+start and end positions are farther apart than ``d_min``. A vertex moving linearly stays in the box of
+its start and end, so every point of a feature stays in its box over the whole step, and the distance
+between the boxes bounds the distance of the features from below. The boxes are taken on the input
+coordinates (minimum and maximum are exact), each axis gap is reduced by twice the input rounding
+``extra_error`` and the comparison carries a relative margin far above float32 rounding, so a pair that
+could come within ``d_min`` is never excluded. This is the common case of a step's candidates: the broad
+phase pairs features whose boxes come within the thickness h, and the CCD tests the much smaller
+``d_min``; the test costs a few comparisons where the distance below costs tens of operations.
+
+**Motion-bound filter.** Next, a pair is excluded when its distance at t0, bounded
 from below with the distance functions' documented float32 error, exceeds ``d_min`` plus the largest
 motion of F over the step (|F(t)| >= |F(0)| - max |F(1) - F(0)|, the maximum taken at the corners of
 the (u, v) domain). Resting and slowly moving pairs, the grazing queries that cost the search the most
@@ -470,6 +480,26 @@ _MOTION_MARGIN = wp.constant(1.0e-5)
 
 
 @wp.func
+def _features_apart(
+    lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3, extra_error: float, minimum_distance: float
+) -> bool:
+    """Swept-box exclusion (module docstring): True when boxes [lo_a, hi_a] and [lo_b, hi_b] of two
+    features' start and end positions are provably farther apart than ``minimum_distance``.
+
+    Each axis gap is computed with one rounding (relative error at most 2^-24), reduced by twice the
+    input rounding ``extra_error`` (with the margin), squared and summed (a few more roundings); the
+    relative margin :data:`_MOTION_MARGIN` (1e-5) covers them all. Coordinates must be finite, as
+    for the whole CCD (the host API refuses others; the broad phase flags their boxes).
+    """
+    slack = 2.0 * extra_error * (1.0 + _MOTION_MARGIN)
+    gap_squared = float(0.0)
+    for k in range(3):
+        d = wp.max(wp.max(lo_b[k] - hi_a[k], lo_a[k] - hi_b[k]) - slack, 0.0)
+        gap_squared += d * d
+    return gap_squared > minimum_distance * minimum_distance * (1.0 + _MOTION_MARGIN)
+
+
+@wp.func
 def _motion_cannot_reach(
     distance_squared_t0: float,
     q0: wp.vec3,
@@ -559,6 +589,10 @@ def vertex_face_ccd_toi(
     that was rounded to float32). With p_t1 = p_t0 etc. this is a conservative static proximity
     test whose answer is 0 (hit) or ``NO_HIT``.
     """
+    face_lo = wp.min(wp.min(wp.min(a_t0, b_t0), wp.min(c_t0, a_t1)), wp.min(b_t1, c_t1))
+    face_hi = wp.max(wp.max(wp.max(a_t0, b_t0), wp.max(c_t0, a_t1)), wp.max(b_t1, c_t1))
+    if _features_apart(wp.min(p_t0, p_t1), wp.max(p_t0, p_t1), face_lo, face_hi, extra_error, minimum_distance):
+        return 2.0
     r = p_t0
     yp0 = p_t0 - r
     ya0 = a_t0 - r
@@ -601,6 +635,11 @@ def edge_edge_ccd_toi(
 
     See :func:`vertex_face_ccd_toi` for ``extra_error`` and the static use.
     """
+    if _features_apart(wp.min(wp.min(a0_t0, a1_t0), wp.min(a0_t1, a1_t1)),
+                       wp.max(wp.max(a0_t0, a1_t0), wp.max(a0_t1, a1_t1)),
+                       wp.min(wp.min(b0_t0, b1_t0), wp.min(b0_t1, b1_t1)),
+                       wp.max(wp.max(b0_t0, b1_t0), wp.max(b0_t1, b1_t1)), extra_error, minimum_distance):
+        return 2.0
     r = a0_t0
     ya00 = a0_t0 - r
     ya10 = a1_t0 - r

@@ -271,3 +271,46 @@ def test_motion_bound_filter_never_drops_a_near_pair(seed: int, motion: float, g
             assert static[i]
         elif distance > d_min * 1.01:
             assert not static[i]
+
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    kind=st.sampled_from(["vertex-face", "edge-edge"]),
+    scale=st.sampled_from([1e-3, 1.0, 1e3]),
+    shift=st.floats(-1e3, 1e3),
+    relative=st.floats(-1e-3, 1e-3),
+    exact_float32=st.booleans(),
+)
+def test_swept_box_filter_keeps_pairs_at_the_box_gap(kind: str, scale: float, shift: float, relative: float,
+                                                      exact_float32: bool) -> None:
+    """Axis-aligned pairs whose closest distance equals the gap between their swept boxes (the swept-box
+    filter's tightest case): a pair that comes within d_min is reported, one ending 1.5 d_min away is not.
+
+    The second feature sinks along z onto the first, to end d_min (1 + relative) above it: the boxes'
+    z gap is then the closest distance, at every scale and translation, for float32 input and for float64
+    input that float32 cannot hold (the input rounding bound)."""
+    d_min = 0.01 * scale
+    end = d_min * (1.0 + relative)
+    if kind == "vertex-face":  # the face at z = 0, the vertex sinking onto its interior
+        face = [[0.0, 0.0, 0.0], [scale, 0.0, 0.0], [0.0, scale, 0.0]]
+        x0 = np.array([[0.25 * scale, 0.25 * scale, 3 * d_min]] + face)
+        x1 = np.array([[0.25 * scale, 0.25 * scale, end]] + face)
+        moving, resting, ccd = [0], [1, 2, 3], vertex_face_ccd
+    else:  # edge a along x at z = 0, edge b along y sinking onto its middle
+        a = [[0.0, 0.0, 0.0], [scale, 0.0, 0.0]]
+        x0 = np.array(a + [[0.5 * scale, -0.5 * scale, 3 * d_min], [0.5 * scale, 0.5 * scale, 3 * d_min]])
+        x1 = np.array(a + [[0.5 * scale, -0.5 * scale, end], [0.5 * scale, 0.5 * scale, end]])
+        moving, resting, ccd = [2, 3], [0, 1], edge_edge_ccd
+    x0, x1 = x0 + shift, x1 + shift
+    if exact_float32:
+        x0, x1 = x0.astype(np.float32).astype(np.float64), x1.astype(np.float32).astype(np.float64)
+    # The closest distance of the coordinates as given: the z gap at the end of the step.
+    closest = float(x1[moving, 2].min() - x1[resting, 2].max())
+    hit, _ = ccd(x0[None], x1[None], d_min)
+    if closest <= d_min:
+        assert hit[0], f"comes within {closest!r} <= d_min {d_min!r} but no contact is reported"
+    apart = x1.copy()
+    apart[moving, 2] += 0.5 * d_min
+    if abs(shift) * 1e-6 < 0.1 * d_min:  # the shift's rounding is far below the extra half d_min
+        assert not ccd(x0[None], apart[None], d_min)[0][0]
