@@ -14,16 +14,16 @@ owned_vertex_bits         (face_count,) int32  bit k set: the face owns its vert
 owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge k (face_edges)
 ========================  ===================  ==============================================
 
-One thread per triangle pair first counts its feature pairs whose own boxes overlap; a pair with
-any then meets the supporting-plane test of :mod:`pscc.collision.pair_filter` (the costlier test,
-so it runs only where it can save narrow-phase work) and, unless a plane separates its triangles,
-appends its feature pairs to the candidate buffers with one atomic add per kind. The pass is launched
-at the capacity of the triangle-pair buffer and reads the number of valid pairs from a device counter
-(:meth:`FeaturePairs.extract_device`), so it reads nothing back and can be captured. A buffer that
-overflows keeps counting on the device; :meth:`CandidatePairs.fits` grows it and the pass runs again
-(:meth:`FeaturePairs.extract` does both). The order of the candidates follows the atomic appends
-(fixed on the CPU, where the threads of a launch run in order); the detector sorts its results, so
-they do not depend on it.
+Each triangle pair (a row of a row kernel, :mod:`pscc._lanes`) first counts its feature pairs whose
+own boxes overlap; a pair with any then meets the supporting-plane test of
+:mod:`pscc.collision.pair_filter` (the costlier test, so it runs only where it can save narrow-phase
+work) and, unless a plane separates its triangles, appends its feature pairs to the candidate buffers
+with one atomic add per kind. The pass is launched for the capacity of the triangle-pair buffer and
+reads the number of valid pairs from a device counter (:meth:`FeaturePairs.extract_device`), so it
+reads nothing back and can be captured. A buffer that overflows keeps counting on the device;
+:meth:`CandidatePairs.fits` grows it and the pass runs again (:meth:`FeaturePairs.extract` does both).
+The order of the candidates follows the atomic appends (fixed on the CPU, where one thread takes the
+pairs in order); the detector sorts its results, so they do not depend on it.
 
 ========================  ===================  ==============================================
 pair_stats                (3,) int32           [kept pairs, kept within one object, all pairs
@@ -37,6 +37,7 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc._lanes import row_lanes
 from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
@@ -105,110 +106,123 @@ class PlaneTestArgs:
     params: CcdParameters
 
 
+@wp.struct
+class FeatureTopology:
+    """The mesh arrays :func:`_extract_features` reads (shared topology and ownership bits)."""
+
+    faces: wp.array(dtype=wp.vec3i)
+    face_edges: wp.array(dtype=wp.vec3i)
+    edges: wp.array(dtype=wp.vec2i)
+    owned_vertex_bits: wp.array(dtype=wp.int32)
+    owned_edge_bits: wp.array(dtype=wp.int32)
+
+
 @wp.kernel
 def _extract_features(
     # in:
-    faces: wp.array(dtype=wp.vec3i),
-    face_edges: wp.array(dtype=wp.vec3i),
-    edges: wp.array(dtype=wp.vec2i),
-    owned_vertex_bits: wp.array(dtype=wp.int32),
-    owned_edge_bits: wp.array(dtype=wp.int32),
+    topology: FeatureTopology,
     triangle_pairs: wp.array(dtype=wp.vec2i),
     pair_counts: wp.array(dtype=wp.int64),
     planes: PlaneTestArgs,
     boxes: PrimitiveBoxArgs,
+    lanes: int,
     # out:
     counts: wp.array(dtype=wp.int32),
     vertex_face_out: wp.array(dtype=wp.vec2i),
     edge_edge_out: wp.array(dtype=wp.vec2i),
     pair_stats: wp.array(dtype=wp.int32),
 ):
-    """One thread per triangle-pair slot (threads past ``min(pair_counts[0], slots)`` return): find
-    its feature pairs whose boxes overlap (as bit masks, each box loaded once); if there are any and
-    no supporting plane separates the triangles, append them (written only below each buffer's
-    capacity; the counters keep counting) and count the pair as kept. ``pair_stats`` = [kept, kept
-    within one object, all pairs within one object]."""
-    i = wp.tid()
-    if wp.int64(i) >= wp.min(pair_counts[0], wp.int64(triangle_pairs.shape[0])):
-        return
-    pair = triangle_pairs[i]
-    a = pair[0]
-    b = pair[1]
-    same_object = planes.object_ids[a] == planes.object_ids[b]
-    if same_object:
-        wp.atomic_add(pair_stats, 2, 1)
-    mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, a, b)
-    mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, b, a)
-    vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
-    # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests.
-    bits_a = owned_edge_bits[a]
-    bits_b = owned_edge_bits[b]
-    ids_a = face_edges[a]
-    ids_b = face_edges[b]
-    lower_b = wp.mat33(0.0)
-    upper_b = wp.mat33(0.0)
-    ends_b0 = wp.vec3i(-1, -1, -1)
-    ends_b1 = wp.vec3i(-1, -1, -1)
-    for k in range(3):
-        if (bits_b >> k) & 1:
-            eb = ids_b[k]
-            ends = edges[eb]
-            ends_b0[k] = ends[0]
-            ends_b1[k] = ends[1]
-            lower_b[k] = boxes.edge_lower[eb]
-            upper_b[k] = boxes.edge_upper[eb]
-    edge_mask = int(0)
-    for j in range(3):
-        if (bits_a >> j) & 1:
-            ea = ids_a[j]
-            ends_a = edges[ea]
-            lower_a = boxes.edge_lower[ea]
-            upper_a = boxes.edge_upper[ea]
-            for k in range(3):
-                if (bits_b >> k) & 1:
-                    shared = (ends_a[0] == ends_b0[k] or ends_a[0] == ends_b1[k] or ends_a[1] == ends_b0[k]
-                              or ends_a[1] == ends_b1[k])
-                    if not shared and boxes_overlap(lower_a, upper_a, lower_b[k], upper_b[k]):
-                        edge_mask = edge_mask | (1 << (3 * j + k))
-    ee = int(0)
-    for t in range(9):
-        ee += (edge_mask >> t) & 1
-    if vf + ee == 0:
-        return
-    if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
-                               planes.thickness, planes.factor, planes.params):
-        return
-    wp.atomic_add(pair_stats, 0, 1)
-    if same_object:
-        wp.atomic_add(pair_stats, 1, 1)
-    # Every row below the capacity is written, also when the buffer overflows part-way through this
-    # pair's rows: readers clamp the count to the capacity and read every row below it.
-    if vf > 0:
-        slot = wp.atomic_add(counts, 0, vf)
-        capacity = vertex_face_out.shape[0]
-        tri_a = faces[a]
-        tri_b = faces[b]
+    """Row kernel (:mod:`pscc._lanes`) over the valid triangle pairs, the first
+    ``min(pair_counts[0], slots)``. For each: find its feature pairs whose boxes overlap (as bit masks,
+    each box loaded once); if there are any and no supporting plane separates the triangles, append them
+    (written only below each buffer's capacity; the counters keep counting) and count the pair as kept.
+    ``pair_stats`` = [kept, kept within one object, all pairs within one object]."""
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    faces = topology.faces
+    face_edges = topology.face_edges
+    edges = topology.edges
+    owned_vertex_bits = topology.owned_vertex_bits
+    owned_edge_bits = topology.owned_edge_bits
+    rows = int(wp.min(pair_counts[0], wp.int64(triangle_pairs.shape[0])))
+    for i in range(wp.tid(), rows, lanes):
+        pair = triangle_pairs[i]
+        a = pair[0]
+        b = pair[1]
+        same_object = planes.object_ids[a] == planes.object_ids[b]
+        if same_object:
+            wp.atomic_add(pair_stats, 2, 1)
+        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, a, b)
+        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, b, a)
+        vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
+        # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests.
+        bits_a = owned_edge_bits[a]
+        bits_b = owned_edge_bits[b]
+        ids_a = face_edges[a]
+        ids_b = face_edges[b]
+        lower_b = wp.mat33(0.0)
+        upper_b = wp.mat33(0.0)
+        ends_b0 = wp.vec3i(-1, -1, -1)
+        ends_b1 = wp.vec3i(-1, -1, -1)
         for k in range(3):
-            if (mask_ab >> k) & 1:
-                if slot < capacity:
-                    vertex_face_out[slot] = wp.vec2i(tri_a[k], b)
-                slot += 1
-        for k in range(3):
-            if (mask_ba >> k) & 1:
-                if slot < capacity:
-                    vertex_face_out[slot] = wp.vec2i(tri_b[k], a)
-                slot += 1
-    if ee > 0:
-        slot = wp.atomic_add(counts, 1, ee)
-        capacity = edge_edge_out.shape[0]
+            if (bits_b >> k) & 1:
+                eb = ids_b[k]
+                ends = edges[eb]
+                ends_b0[k] = ends[0]
+                ends_b1[k] = ends[1]
+                lower_b[k] = boxes.edge_lower[eb]
+                upper_b[k] = boxes.edge_upper[eb]
+        edge_mask = int(0)
         for j in range(3):
+            if (bits_a >> j) & 1:
+                ea = ids_a[j]
+                ends_a = edges[ea]
+                lower_a = boxes.edge_lower[ea]
+                upper_a = boxes.edge_upper[ea]
+                for k in range(3):
+                    if (bits_b >> k) & 1:
+                        shared = (ends_a[0] == ends_b0[k] or ends_a[0] == ends_b1[k] or ends_a[1] == ends_b0[k]
+                                  or ends_a[1] == ends_b1[k])
+                        if not shared and boxes_overlap(lower_a, upper_a, lower_b[k], upper_b[k]):
+                            edge_mask = edge_mask | (1 << (3 * j + k))
+        ee = int(0)
+        for t in range(9):
+            ee += (edge_mask >> t) & 1
+        if vf + ee == 0:
+            continue
+        if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
+                                   planes.thickness, planes.factor, planes.params):
+            continue
+        wp.atomic_add(pair_stats, 0, 1)
+        if same_object:
+            wp.atomic_add(pair_stats, 1, 1)
+        # Every row below the capacity is written, also when the buffer overflows part-way through this
+        # pair's rows: readers clamp the count to the capacity and read every row below it.
+        if vf > 0:
+            slot = wp.atomic_add(counts, 0, vf)
+            capacity = vertex_face_out.shape[0]
+            tri_a = faces[a]
+            tri_b = faces[b]
             for k in range(3):
-                if (edge_mask >> (3 * j + k)) & 1:
+                if (mask_ab >> k) & 1:
                     if slot < capacity:
-                        ea = ids_a[j]
-                        eb = ids_b[k]
-                        edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
+                        vertex_face_out[slot] = wp.vec2i(tri_a[k], b)
                     slot += 1
+            for k in range(3):
+                if (mask_ba >> k) & 1:
+                    if slot < capacity:
+                        vertex_face_out[slot] = wp.vec2i(tri_b[k], a)
+                    slot += 1
+        if ee > 0:
+            slot = wp.atomic_add(counts, 1, ee)
+            capacity = edge_edge_out.shape[0]
+            for j in range(3):
+                for k in range(3):
+                    if (edge_mask >> (3 * j + k)) & 1:
+                        if slot < capacity:
+                            ea = ids_a[j]
+                            eb = ids_b[k]
+                            edge_edge_out[slot] = wp.vec2i(wp.min(ea, eb), wp.max(ea, eb))
+                        slot += 1
 
 
 class FeaturePairs:
@@ -233,6 +247,13 @@ class FeaturePairs:
         self.face_edges = device_topology.face_edges
         self.faces = device_topology.faces
         self.edges = device_topology.edges
+        self.topology = FeatureTopology()
+        """The faces, face edges, edges and ownership bits as the kernel's struct."""
+        self.topology.faces = self.faces
+        self.topology.face_edges = self.face_edges
+        self.topology.edges = self.edges
+        self.topology.owned_vertex_bits = self.owned_vertex_bits
+        self.topology.owned_edge_bits = self.owned_edge_bits
         self.pair_stats = wp.zeros(3, dtype=wp.int32, device=device)
         # The host API's pair count, handed to the device path like a broad phase's counter.
         self._host_pair_count = wp.zeros(1, dtype=wp.int64, device=device)
@@ -264,11 +285,11 @@ class FeaturePairs:
         """Device path of :meth:`extract`: reset ``candidates`` and ``pair_stats``, then append the
         feature pairs of the valid triangle pairs, reading their number on the device.
 
-        One launch of ``triangle_pairs.shape[0]`` threads; the valid pairs are the first
-        ``min(pair_counts[0], triangle_pairs.shape[0])``. Candidate buffers that are too small keep
-        counting (``candidates.counts``); the owner calls :meth:`CandidatePairs.fits` (a sync point)
-        and runs again when it returns False. ``pair_stats`` holds the kept / self counters on the
-        device.
+        One launch of a row kernel (:mod:`pscc._lanes`) over ``triangle_pairs.shape[0]`` slots; the
+        valid pairs are the first ``min(pair_counts[0], triangle_pairs.shape[0])``. Candidate buffers
+        that are too small keep counting (``candidates.counts``); the owner calls
+        :meth:`CandidatePairs.fits` (a sync point) and runs again when it returns False. ``pair_stats``
+        holds the kept / self counters on the device.
 
         Args:
             triangle_pairs: (slots,) ``wp.vec2i`` candidate triangle pairs (face a, face b).
@@ -294,9 +315,9 @@ class FeaturePairs:
         slots = triangle_pairs.shape[0]
         if slots == 0:
             return
-        wp.launch(_extract_features, dim=slots, device=self.device,
-                  inputs=[self.faces, self.face_edges, self.edges, self.owned_vertex_bits, self.owned_edge_bits,
-                          triangle_pairs, pair_counts, planes, boxes],
+        lanes = row_lanes(self.device, slots)
+        wp.launch(_extract_features, dim=lanes, device=self.device,
+                  inputs=[self.topology, triangle_pairs, pair_counts, planes, boxes, lanes],
                   outputs=[candidates.counts, candidates.vertex_face, candidates.edge_edge, self.pair_stats])
 
     def extract(

@@ -12,7 +12,7 @@ Pipeline of :meth:`IntersectionCheck.find`:
    pair always has overlapping closed boxes);
 2. :class:`~pscc.collision.spatial_hash.SpatialHash` over the boxes, every face its own node (plain
    spatial hashing; pairs sharing a vertex are kept, since their other edges can still cross);
-3. one thread per face pair ``(g, f)``: the 3 + 3 edges of one face against the other face,
+3. per face pair ``(g, f)`` (a row kernel, :mod:`pscc._lanes`): the 3 + 3 edges of one face against the other face,
    skipping edges that share a vertex with that face. Edge ``e`` is tested only from its owner,
    the lowest-id face containing it (``edge_owner``), so each (edge, face) pair is tested and
    reported once (an edge inside a face's box makes every face of that edge overlap the box);
@@ -55,6 +55,7 @@ import numpy as np
 import warp as wp
 
 from pscc._checks import check_object_ids, check_points
+from pscc._lanes import row_lanes
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import CapacityError, InputError
@@ -140,6 +141,7 @@ def _test_face_pairs(
     pair_counts: wp.array(dtype=wp.int64),
     cloth_face_count: int,
     capacity: int,
+    lanes: int,
     # out:
     hit_count: wp.array(dtype=wp.int64),
     crossing_count: wp.array(dtype=wp.int32),
@@ -147,37 +149,41 @@ def _test_face_pairs(
     hit_kind: wp.array(dtype=wp.int32),
     hit_bound: wp.array(dtype=float),
 ):
-    """One thread per face pair slot (the first min(pair_counts[0], slots) are live): owned edges of
-    each face against the other face. Every hit is counted (past ``capacity`` too); a hit whose edge
-    owner or face is below ``cloth_face_count`` also counts as a cloth crossing."""
-    i = wp.tid()
-    if wp.int64(i) >= pair_counts[0]:
-        return
-    pair = face_pairs[i]
-    for side in range(2):
-        g = pair[side]
-        f = pair[1 - side]
-        fv = topology.faces[f]
-        fe = topology.face_edges[g]
-        for k in range(3):
-            e = fe[k]
-            if topology.edge_owner[e] != g:
-                continue
-            ev = topology.edges[e]
-            if ev[0] == fv[0] or ev[0] == fv[1] or ev[0] == fv[2] or ev[1] == fv[0] or ev[1] == fv[1] or ev[1] == fv[2]:
-                continue
-            r = segment_triangle_classify(positions[ev[0]], positions[ev[1]],
-                                          positions[fv[0]], positions[fv[1]], positions[fv[2]])
-            if r[0] > 0.5:
-                if g < cloth_face_count or f < cloth_face_count:
-                    wp.atomic_add(crossing_count, 0, 1)
-                slot = wp.atomic_add(hit_count, 0, wp.int64(1))
-                if slot < wp.int64(capacity):
-                    s = int(slot)
-                    hits[s] = wp.vec2i(e, f)
-                    hit_kind[s] = int(r[0] + 0.5)
-                    hit_bound[s] = r[1]
-
+    """Row kernel (:mod:`pscc._lanes`) over the live face pairs, the first min(pair_counts[0], slots):
+    owned edges of each face against the other face. Every hit is counted (past ``capacity`` too); a hit
+    whose edge owner or face is below ``cloth_face_count`` also counts as a cloth crossing."""
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    faces = topology.faces
+    face_edges = topology.face_edges
+    edge_owner = topology.edge_owner
+    edges = topology.edges
+    rows = int(wp.min(pair_counts[0], wp.int64(face_pairs.shape[0])))
+    for i in range(wp.tid(), rows, lanes):
+        pair = face_pairs[i]
+        for side in range(2):
+            g = pair[side]
+            f = pair[1 - side]
+            fv = faces[f]
+            fe = face_edges[g]
+            for k in range(3):
+                e = fe[k]
+                if edge_owner[e] != g:
+                    continue
+                ev = edges[e]
+                if (ev[0] == fv[0] or ev[0] == fv[1] or ev[0] == fv[2] or ev[1] == fv[0] or ev[1] == fv[1]
+                        or ev[1] == fv[2]):
+                    continue
+                r = segment_triangle_classify(positions[ev[0]], positions[ev[1]],
+                                              positions[fv[0]], positions[fv[1]], positions[fv[2]])
+                if r[0] > 0.5:
+                    if g < cloth_face_count or f < cloth_face_count:
+                        wp.atomic_add(crossing_count, 0, 1)
+                    slot = wp.atomic_add(hit_count, 0, wp.int64(1))
+                    if slot < wp.int64(capacity):
+                        s = int(slot)
+                        hits[s] = wp.vec2i(e, f)
+                        hit_kind[s] = int(r[0] + 0.5)
+                        hit_bound[s] = r[1]
 
 class IntersectionCheck:
     """Conservative discrete intersection check of one triangle soup (cloth and obstacles together).
@@ -358,8 +364,9 @@ class IntersectionCheck:
                   outputs=[self.face_lower, self.face_upper], device=dev)
         hash_ = self.spatial_hash
         hash_.find_pairs_device(self.face_lower, self.face_upper)
-        wp.launch(_test_face_pairs, dim=hash_.pair_capacity,
-                  inputs=[self._topology, points, hash_.pairs, hash_.counts, cloth, self.hit_capacity],
+        lanes = row_lanes(dev, hash_.pair_capacity)
+        wp.launch(_test_face_pairs, dim=lanes,
+                  inputs=[self._topology, points, hash_.pairs, hash_.counts, cloth, self.hit_capacity, lanes],
                   outputs=[self.hit_count, self.crossing_count, self.hits, self.hit_kind, self.hit_bound],
                   device=dev)
 

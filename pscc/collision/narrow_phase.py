@@ -1,6 +1,6 @@
 """Narrow phase: the conservative CCD / proximity test on every candidate feature pair.
 
-One thread per candidate pair calls :func:`pscc.geometry.ccd.vertex_face_ccd_toi` or
+Every candidate pair goes through :func:`pscc.geometry.ccd.vertex_face_ccd_toi` or
 :func:`pscc.geometry.ccd.edge_edge_ccd_toi`. Discrete detection (DCD) is the same test with the
 end positions equal to the start positions: the pair is reported when it is provably within, or
 possibly within (the documented tolerance band), the thickness.
@@ -17,8 +17,9 @@ hit_counts              (2,) int32             valid rows with toi <= 1 after th
 moved                   (vertex_count,) int32  per-vertex marks of the CCD re-check
 ======================  =====================  ===============================================
 
-Every kernel is launched at the capacity of its candidate buffer and reads the number of valid rows
-from ``candidates.counts`` on the device (clamped to the buffers), so :meth:`NarrowPhase.run_device`
+Every kernel is a row kernel (:mod:`pscc._lanes`: one thread per slot of its candidate buffer on a GPU,
+one thread over all rows on the CPU) and reads the number of valid rows from ``candidates.counts`` on the
+device (clamped to the buffers), so :meth:`NarrowPhase.run_device`
 reads nothing back and can be captured into a graph. The time-of-impact buffers are at least as long
 as the candidate buffers (:meth:`NarrowPhase.reserve`, called by the owner after
 :meth:`CandidatePairs.fits` grew them), and :meth:`NarrowPhase.contacts` hands the rows to the
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from pscc._lanes import row_lanes
 from pscc.collision.candidates import CandidatePairs, valid_rows
 from pscc.collision.contacts import ContactArgs, DeviceContacts
 from pscc.collision.scratch import view
@@ -51,36 +53,35 @@ def _vertex_face_narrow(
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
     counts: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
     hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex-face candidate slot (threads past the clamped ``counts[0]`` return).
+    """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows (``counts[0]``, clamped).
     With ``only_moved``, a pair none of whose vertices is marked in ``moved`` keeps its previous
     result (its trajectory has not changed). Every valid row with toi <= 1 adds 1 to ``hit_counts[0]``."""
-    i = wp.tid()
-    if i >= valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])):
-        return
-    pair = pairs[i]
-    v = pair[0]
-    f = faces[pair[1]]
-    # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
-    retest = int(1)
-    if only_moved != 0:
-        if moved[v] + moved[f[0]] + moved[f[1]] + moved[f[2]] == 0:
-            retest = 0
-    toi = float(0.0)
-    if retest == 0:
-        toi = toi_out[i]
-    else:
-        toi = vertex_face_ccd_toi(
-            positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
-            positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
-            thickness, 0.0, params,
-        )
-        toi_out[i] = toi
-    if toi <= 1.0:
-        wp.atomic_add(hit_counts, 0, 1)
+    for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
+        pair = pairs[i]
+        v = pair[0]
+        f = faces[pair[1]]
+        # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
+        retest = int(1)
+        if only_moved != 0:
+            if moved[v] + moved[f[0]] + moved[f[1]] + moved[f[2]] == 0:
+                retest = 0
+        toi = float(0.0)
+        if retest == 0:
+            toi = toi_out[i]
+        else:
+            toi = vertex_face_ccd_toi(
+                positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
+                positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
+                thickness, 0.0, params,
+            )
+            toi_out[i] = toi
+        if toi <= 1.0:
+            wp.atomic_add(hit_counts, 0, 1)
 
 
 @wp.kernel
@@ -95,35 +96,34 @@ def _edge_edge_narrow(
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
     counts: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
     hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per edge-edge candidate slot (threads past the clamped ``counts[1]`` return;
+    """Row kernel (:mod:`pscc._lanes`) over the valid edge-edge rows (``counts[1]``, clamped;
     ``moved``, ``only_moved``, ``hit_counts[1]``: as for vertex-face)."""
-    i = wp.tid()
-    if i >= valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])):
-        return
-    pair = pairs[i]
-    a = edges[pair[0]]
-    b = edges[pair[1]]
-    # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
-    retest = int(1)
-    if only_moved != 0:
-        if moved[a[0]] + moved[a[1]] + moved[b[0]] + moved[b[1]] == 0:
-            retest = 0
-    toi = float(0.0)
-    if retest == 0:
-        toi = toi_out[i]
-    else:
-        toi = edge_edge_ccd_toi(
-            positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
-            positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
-            thickness, 0.0, params,
-        )
-        toi_out[i] = toi
-    if toi <= 1.0:
-        wp.atomic_add(hit_counts, 1, 1)
+    for i in range(wp.tid(), valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
+        pair = pairs[i]
+        a = edges[pair[0]]
+        b = edges[pair[1]]
+        # Nested ifs: Warp evaluates both operands of ``and`` (``moved`` may be a 1-element dummy).
+        retest = int(1)
+        if only_moved != 0:
+            if moved[a[0]] + moved[a[1]] + moved[b[0]] + moved[b[1]] == 0:
+                retest = 0
+        toi = float(0.0)
+        if retest == 0:
+            toi = toi_out[i]
+        else:
+            toi = edge_edge_ccd_toi(
+                positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
+                positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
+                thickness, 0.0, params,
+            )
+            toi_out[i] = toi
+        if toi <= 1.0:
+            wp.atomic_add(hit_counts, 1, 1)
 
 
 @wp.kernel
@@ -184,6 +184,25 @@ def _within(distance_sq: float, thickness: float, error: float) -> float:
     return 2.0
 
 
+@wp.func
+def _vertex_face_proximity_toi(
+    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, thickness: float, params: CcdParameters,
+    proximity: ProximityParameters,
+) -> float:
+    """0 when vertex p may be within ``thickness`` of triangle (a, b, c), else ``NO_HIT``: closed-form
+    distance for well-shaped faces, else the search."""
+    ab = b - a
+    ac = c - a
+    n = wp.cross(ab, ac)
+    longest = wp.max(wp.max(wp.dot(ab, ab), wp.dot(ac, ac)), wp.dot(c - b, c - b))
+    area_sq = wp.dot(n, n)
+    if area_sq == 0.0 or area_sq >= proximity.well_shaped_flatness * longest * longest:
+        error = proximity.distance_error * _local_scale(a, b, c, p)
+        return _within(vertex_face_distance_squared(p, a, b, c), thickness, error)
+    # Nearly flat triangle: the closed form may overestimate; the inclusion search is exact-safe.
+    return vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
+
+
 @wp.kernel
 def _vertex_face_proximity(
     # in:
@@ -194,36 +213,21 @@ def _vertex_face_proximity(
     params: CcdParameters,
     proximity: ProximityParameters,
     counts: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
     hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex-face candidate slot (threads past the clamped ``counts[0]`` return):
-    closed-form distance for well-shaped faces, else the search; hits add 1 to ``hit_counts[0]``."""
-    i = wp.tid()
-    if i >= valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])):
-        return
-    pair = pairs[i]
-    f = faces[pair[1]]
-    p = positions[pair[0]]
-    a = positions[f[0]]
-    b = positions[f[1]]
-    c = positions[f[2]]
-    ab = b - a
-    ac = c - a
-    n = wp.cross(ab, ac)
-    longest = wp.max(wp.max(wp.dot(ab, ab), wp.dot(ac, ac)), wp.dot(c - b, c - b))
-    area_sq = wp.dot(n, n)
-    toi = float(0.0)
-    if area_sq == 0.0 or area_sq >= proximity.well_shaped_flatness * longest * longest:
-        error = proximity.distance_error * _local_scale(a, b, c, p)
-        toi = _within(vertex_face_distance_squared(p, a, b, c), thickness, error)
-    else:
-        # Nearly flat triangle: the closed form may overestimate; the inclusion search is exact-safe.
-        toi = vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
-    toi_out[i] = toi
-    if toi <= 1.0:
-        wp.atomic_add(hit_counts, 0, 1)
+    """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows (``counts[0]``, clamped):
+    :func:`_vertex_face_proximity_toi`; hits add 1 to ``hit_counts[0]``."""
+    for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
+        pair = pairs[i]
+        f = faces[pair[1]]
+        toi = _vertex_face_proximity_toi(positions[pair[0]], positions[f[0]], positions[f[1]], positions[f[2]],
+                                         thickness, params, proximity)
+        toi_out[i] = toi
+        if toi <= 1.0:
+            wp.atomic_add(hit_counts, 0, 1)
 
 
 @wp.kernel
@@ -233,30 +237,28 @@ def _edge_edge_proximity(
     pairs: wp.array(dtype=wp.vec2i),
     positions: wp.array(dtype=wp.vec3),
     thickness: float,
-    params: CcdParameters,
     proximity: ProximityParameters,
     counts: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     toi_out: wp.array(dtype=wp.float32),
     hit_counts: wp.array(dtype=wp.int32),
 ):
-    """One thread per edge-edge candidate slot (threads past the clamped ``counts[1]`` return):
+    """Row kernel (:mod:`pscc._lanes`) over the valid edge-edge rows (``counts[1]``, clamped):
     closed-form distance (its bound holds for every edge pair); hits add 1 to ``hit_counts[1]``."""
-    i = wp.tid()
-    if i >= valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])):
-        return
-    pair = pairs[i]
-    ea = edges[pair[0]]
-    eb = edges[pair[1]]
-    a0 = positions[ea[0]]
-    a1 = positions[ea[1]]
-    b0 = positions[eb[0]]
-    b1 = positions[eb[1]]
-    error = proximity.distance_error * _local_scale(a0, a1, b0, b1)
-    toi = _within(edge_edge_distance_squared(a0, a1, b0, b1), thickness, error)
-    toi_out[i] = toi
-    if toi <= 1.0:
-        wp.atomic_add(hit_counts, 1, 1)
+    for i in range(wp.tid(), valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
+        pair = pairs[i]
+        ea = edges[pair[0]]
+        eb = edges[pair[1]]
+        a0 = positions[ea[0]]
+        a1 = positions[ea[1]]
+        b0 = positions[eb[0]]
+        b1 = positions[eb[1]]
+        error = proximity.distance_error * _local_scale(a0, a1, b0, b1)
+        toi = _within(edge_edge_distance_squared(a0, a1, b0, b1), thickness, error)
+        toi_out[i] = toi
+        if toi <= 1.0:
+            wp.atomic_add(hit_counts, 1, 1)
 
 
 class NarrowPhase:
@@ -362,25 +364,27 @@ class NarrowPhase:
         self.hit_counts.zero_()
         self._continuous = positions_t1 is not positions_t0
         self._thickness = float(thickness)
+        lanes_vf = row_lanes(self.device, candidates.capacity_vf)
+        lanes_ee = row_lanes(self.device, candidates.capacity_ee)
         if positions_t1 is positions_t0:
-            wp.launch(_vertex_face_proximity, dim=candidates.capacity_vf,
+            wp.launch(_vertex_face_proximity, dim=lanes_vf,
                       inputs=[self.faces, candidates.vertex_face, positions_t0, float(thickness), self.params,
-                              self.proximity, candidates.counts],
+                              self.proximity, candidates.counts, lanes_vf],
                       outputs=[self.vertex_face_toi, self.hit_counts], device=self.device)
-            wp.launch(_edge_edge_proximity, dim=candidates.capacity_ee,
-                      inputs=[self.edges, candidates.edge_edge, positions_t0, float(thickness), self.params,
-                              self.proximity, candidates.counts],
+            wp.launch(_edge_edge_proximity, dim=lanes_ee,
+                      inputs=[self.edges, candidates.edge_edge, positions_t0, float(thickness), self.proximity,
+                              candidates.counts, lanes_ee],
                       outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
             return
         only_moved = int(moved is not None)
         marks = moved if moved is not None else self._no_marks
-        wp.launch(_vertex_face_narrow, dim=candidates.capacity_vf,
+        wp.launch(_vertex_face_narrow, dim=lanes_vf,
                   inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1, float(thickness),
-                          self.params, marks, only_moved, candidates.counts],
+                          self.params, marks, only_moved, candidates.counts, lanes_vf],
                   outputs=[self.vertex_face_toi, self.hit_counts], device=self.device)
-        wp.launch(_edge_edge_narrow, dim=candidates.capacity_ee,
+        wp.launch(_edge_edge_narrow, dim=lanes_ee,
                   inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1, float(thickness),
-                          self.params, marks, only_moved, candidates.counts],
+                          self.params, marks, only_moved, candidates.counts, lanes_ee],
                   outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
 
     def run(

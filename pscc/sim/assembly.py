@@ -52,6 +52,7 @@ import numpy as np
 import warp as wp
 from warp.sparse import bsr_get_diag, bsr_set_from_triplets, bsr_zeros
 
+from pscc._lanes import row_lanes
 from pscc.sim.contact_springs import ContactSprings
 from pscc.sim.materials import (
     dihedral_angle,
@@ -279,11 +280,14 @@ def _assemble_hinges(
 
 
 @wp.func
-def _contact_is_valid(contacts: ContactArrays, c: int, vertex_count: int) -> bool:
-    """Whether contact slot c is in use and names four existing vertices."""
-    if c >= wp.min(contacts.count[0], contacts.vertices.shape[0]):
-        return False
-    ids = contacts.vertices[c]
+def _contact_rows(contacts: ContactArrays) -> int:
+    """Contact slots in use: the spring counter clamped to the buffers."""
+    return wp.min(contacts.count[0], contacts.vertices.shape[0])
+
+
+@wp.func
+def _names_vertices(ids: wp.vec4i, vertex_count: int) -> bool:
+    """Whether a contact's four vertex ids all name existing vertices."""
     for a in range(4):
         if ids[a] < 0 or ids[a] >= vertex_count:
             return False
@@ -297,27 +301,20 @@ def _contact_block(coefficients: wp.vec2, n: wp.vec3) -> wp.mat33:
     return coefficients[0] * nn + coefficients[1] * (wp.identity(n=3, dtype=float) - nn)
 
 
-@wp.kernel
-def _assemble_contacts(
-    # in:
+@wp.func
+def _assemble_contact(
     contacts: ContactArrays,
     vertices: VertexArrays,
     positions: wp.array(dtype=wp.vec3),
     v_ref: wp.array(dtype=wp.vec3),
     params: StepParams,
-    # out:
+    c: int,
     coefficients: wp.array(dtype=wp.vec2),
     rhs: wp.array(dtype=wp.vec3),
 ):
-    """One thread per contact slot: spring force and friction damper, and the coefficients of its block K.
-
-    The contact's 16 blocks are ``A_ab = w_a w_b K`` (a, b free) with ``K = dt^2 k_c n n^T + dt c (I - n n^T)``,
-    ``k_c`` times the spring's multiplicity;
-    only ``(dt^2 k_c, dt c)`` is stored (zero for an inactive slot): the normal n is the spring's.
-    """
-    c = wp.tid()
-    coefficients[c] = wp.vec2(0.0)
-    if not _contact_is_valid(contacts, c, positions.shape[0]):
+    """Contact slot ``c`` of :func:`_assemble_contacts` (its coefficients stay zero when it names a missing
+    vertex or is inactive)."""
+    if not _names_vertices(contacts.vertices[c], positions.shape[0]):
         return
     ids = contacts.vertices[c]
     w = contacts.weights[c]
@@ -356,6 +353,30 @@ def _assemble_contacts(
 
 
 @wp.kernel
+def _assemble_contacts(
+    # in:
+    contacts: ContactArrays,
+    vertices: VertexArrays,
+    positions: wp.array(dtype=wp.vec3),
+    v_ref: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    lanes: int,
+    # out:
+    coefficients: wp.array(dtype=wp.vec2),
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """Row kernel (:mod:`pscc._lanes`) over the contact slots in use (``coefficients`` zeroed before):
+    spring force and friction damper, and the coefficients of its block K.
+
+    The contact's 16 blocks are ``A_ab = w_a w_b K`` (a, b free) with ``K = dt^2 k_c n n^T + dt c (I - n n^T)``,
+    ``k_c`` times the spring's multiplicity;
+    only ``(dt^2 k_c, dt c)`` is stored (zero for an inactive slot): the normal n is the spring's.
+    """
+    for c in range(wp.tid(), _contact_rows(contacts), lanes):
+        _assemble_contact(contacts, vertices, positions, v_ref, params, c, coefficients, rhs)
+
+
+@wp.kernel
 def _element_matrix_times(
     # in:
     offsets: wp.array(dtype=wp.int32),
@@ -384,28 +405,34 @@ def _add_contact_products(
     kind: wp.array(dtype=wp.int32),
     coefficients: wp.array(dtype=wp.vec2),
     x: wp.array(dtype=wp.vec3),
+    lanes: int,
     # out:
     y: wp.array(dtype=wp.vec3),
 ):
-    """One thread per contact slot: ``y_a += w_a K sum_b w_b x_b`` over its free vertices a and b."""
-    c = wp.tid()
-    if not _contact_is_valid(contacts, c, x.shape[0]):
-        return
-    coefficient = coefficients[c]
-    if coefficient[0] == 0.0 and coefficient[1] == 0.0:
-        return  # inactive: K = 0
-    ids = contacts.vertices[c]
-    w = contacts.weights[c]
-    combined = wp.vec3(0.0)
-    for b in range(4):
-        if kind[ids[b]] == _FREE:
-            combined = combined + w[b] * x[ids[b]]
-    # K combined in rank-one form: beta combined + (alpha - beta) (n . combined) n.
-    n = contacts.normals[c]
-    product = coefficient[1] * combined + ((coefficient[0] - coefficient[1]) * wp.dot(n, combined)) * n
-    for a in range(4):
-        if kind[ids[a]] == _FREE:
-            wp.atomic_add(y, ids[a], w[a] * product)
+    """Row kernel (:mod:`pscc._lanes`) over the contact slots in use: ``y_a += w_a K sum_b w_b x_b`` over
+    each active contact's free vertices a and b."""
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    contact_vertices = contacts.vertices
+    contact_weights = contacts.weights
+    contact_normals = contacts.normals
+    for c in range(wp.tid(), _contact_rows(contacts), lanes):
+        coefficient = coefficients[c]
+        if coefficient[0] == 0.0 and coefficient[1] == 0.0:
+            continue  # inactive: K = 0
+        ids = contact_vertices[c]
+        if not _names_vertices(ids, x.shape[0]):
+            continue
+        w = contact_weights[c]
+        combined = wp.vec3(0.0)
+        for b in range(4):
+            if kind[ids[b]] == _FREE:
+                combined = combined + w[b] * x[ids[b]]
+        # K combined in rank-one form: beta combined + (alpha - beta) (n . combined) n.
+        n = contact_normals[c]
+        product = coefficient[1] * combined + ((coefficient[0] - coefficient[1]) * wp.dot(n, combined)) * n
+        for a in range(4):
+            if kind[ids[a]] == _FREE:
+                wp.atomic_add(y, ids[a], w[a] * product)
 
 
 @wp.kernel
@@ -415,22 +442,24 @@ def _add_contact_diagonal(
     kind: wp.array(dtype=wp.int32),
     coefficients: wp.array(dtype=wp.vec2),
     vertex_count: int,
+    lanes: int,
     # out:
     diagonal: wp.array(dtype=wp.mat33),
 ):
-    """One thread per contact slot: add ``w_a^2 K`` to the diagonal block of each free vertex a."""
-    c = wp.tid()
-    if not _contact_is_valid(contacts, c, vertex_count):
-        return
-    coefficient = coefficients[c]
-    if coefficient[0] == 0.0 and coefficient[1] == 0.0:
-        return
-    ids = contacts.vertices[c]
-    w = contacts.weights[c]
-    block = _contact_block(coefficient, contacts.normals[c])
-    for a in range(4):
-        if kind[ids[a]] == _FREE:
-            wp.atomic_add(diagonal, ids[a], (w[a] * w[a]) * block)
+    """Row kernel (:mod:`pscc._lanes`) over the contact slots in use: add ``w_a^2 K`` to the diagonal block
+    of each free vertex a."""
+    for c in range(wp.tid(), _contact_rows(contacts), lanes):
+        coefficient = coefficients[c]
+        if coefficient[0] == 0.0 and coefficient[1] == 0.0:
+            continue
+        ids = contacts.vertices[c]
+        if not _names_vertices(ids, vertex_count):
+            continue
+        w = contacts.weights[c]
+        block = _contact_block(coefficient, contacts.normals[c])
+        for a in range(4):
+            if kind[ids[a]] == _FREE:
+                wp.atomic_add(diagonal, ids[a], (w[a] * w[a]) * block)
 
 
 @wp.kernel
@@ -542,8 +571,10 @@ class ImplicitSystem:
             view.multiplicity = contacts.multiplicity
             view.count = contacts.count
             view.rest_gap = contacts.rest_gap
-            wp.launch(_assemble_contacts, dim=contacts.capacity, device=self.device,
-                      inputs=[view, model.vertices, positions, self.reference_velocities, params],
+            self.contact_coefficients.zero_()
+            lanes = row_lanes(self.device, contacts.capacity)
+            wp.launch(_assemble_contacts, dim=lanes, device=self.device,
+                      inputs=[view, model.vertices, positions, self.reference_velocities, params, lanes],
                       outputs=[self.contact_coefficients, self.rhs])
             self._contacts = view
 
@@ -561,9 +592,10 @@ class ImplicitSystem:
                                   inputs=[matrix.offsets, matrix.columns, matrix.values, x], outputs=[y],
                                   record_cmd=True)]
             if self._contacts is not None:
-                commands.append(wp.launch(_add_contact_products, dim=self._contacts.vertices.shape[0],
-                                          device=self.device, inputs=[self._contacts, self.model.vertices.kind,
-                                                                      self.contact_coefficients, x],
+                lanes = row_lanes(self.device, self._contacts.vertices.shape[0])
+                commands.append(wp.launch(_add_contact_products, dim=lanes, device=self.device,
+                                          inputs=[self._contacts, self.model.vertices.kind,
+                                                  self.contact_coefficients, x, lanes],
                                           outputs=[y], record_cmd=True))
             self._product_launches[key] = commands
         for command in commands:
@@ -573,9 +605,10 @@ class ImplicitSystem:
         """Write the (n,) mat33 diagonal blocks of A into ``out``. Allocates: no. Capture-safe: yes."""
         bsr_get_diag(self.matrix, out=out)
         if self._contacts is not None:
-            wp.launch(_add_contact_diagonal, dim=self._contacts.vertices.shape[0], device=self.device,
+            lanes = row_lanes(self.device, self._contacts.vertices.shape[0])
+            wp.launch(_add_contact_diagonal, dim=lanes, device=self.device,
                       inputs=[self._contacts, self.model.vertices.kind, self.contact_coefficients,
-                              self.model.vertex_count], outputs=[out])
+                              self.model.vertex_count, lanes], outputs=[out])
 
     def contact_blocks(self) -> np.ndarray:
         """(contact capacity, 3, 3) float32 block K of every contact slot of the last :meth:`assemble`

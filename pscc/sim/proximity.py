@@ -38,11 +38,12 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc._lanes import row_lanes
 from pscc.collision.contacts import (
     ContactArgs,
-    edge_edge_hit,
+    edge_edge_rows,
     edge_edge_vertices,
-    vertex_face_hit,
+    vertex_face_rows,
     vertex_face_vertices,
 )
 from pscc.collision.device_topology import DeviceTopology
@@ -140,8 +141,8 @@ def _append_contacts(
     kinematic: wp.array(dtype=wp.int32),
     positions: wp.array(dtype=wp.vec3),
     face_edges: wp.array(dtype=wp.vec3i),
-    edge_edge: int,
     merge: int,
+    lanes: int,
     # out:
     table: MergeTable,
     vertices: wp.array(dtype=wp.vec4i),
@@ -150,50 +151,56 @@ def _append_contacts(
     multiplicity: wp.array(dtype=wp.int32),
     count: wp.array(dtype=wp.int32),
 ):
-    """One thread per vertex-face row of ``contacts`` (edge-edge row when ``edge_edge`` is not 0): a hit
-    with a free vertex appends its spring (closest-point weights and unit normal) at the next counter
-    slot, unless an earlier row of the same edge or corner contact did (module docstring): then it
-    only counts in the merge table."""
-    row = wp.tid()
-    ids = wp.vec4i(0, 0, 0, 0)
-    if edge_edge != 0:
-        if not edge_edge_hit(contacts, row):
-            return
-        ids = edge_edge_vertices(contacts, row)
-    else:
-        if not vertex_face_hit(contacts, row):
-            return
-        ids = vertex_face_vertices(contacts, row)
-    # Pairs made only of kinematic vertices: nothing can respond to them.
-    if kinematic[ids[0]] != 0 and kinematic[ids[1]] != 0 and kinematic[ids[2]] != 0 and kinematic[ids[3]] != 0:
-        return
-    x0 = positions[ids[0]]
-    x1 = positions[ids[1]]
-    x2 = positions[ids[2]]
-    x3 = positions[ids[3]]
-    w = pair_weights(x0, x1, x2, x3, edge_edge)
-    key = wp.int64(-1)  # no merge: a face-interior or edges-interior contact, or merge off
-    if merge != 0:
+    """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows of ``contacts`` followed by its valid
+    edge-edge rows (on the CPU, one thread takes them all in that order). A hit with a free vertex appends
+    its spring (closest-point weights and unit normal) at the next counter slot, unless an earlier row of
+    the same edge or corner contact did (module docstring): then it only counts in the merge table."""
+    vertex_face_count = vertex_face_rows(contacts)
+    for r in range(wp.tid(), vertex_face_count + edge_edge_rows(contacts), lanes):
+        edge_edge = int(0)
+        row = r
+        if r >= vertex_face_count:
+            edge_edge = 1
+            row = r - vertex_face_count
+        ids = wp.vec4i(0, 0, 0, 0)
         if edge_edge != 0:
-            key = _edge_edge_key(ids, contacts.edge_edge[row], w)
+            if contacts.edge_edge_toi[row] > 1.0:
+                continue
+            ids = edge_edge_vertices(contacts, row)
         else:
-            key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
-    merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
-    if key >= wp.int64(0):
-        found = _merge_slot(table, key)
-        if found[0] >= 0:
-            wp.atomic_add(table.counts, found[0], 1)
-            if found[1] == 0:
-                return  # counted in the spring of the row that put the key there
-            merged = -(found[0] + 2)
-    slot = wp.atomic_add(count, 0, 1)
-    if slot >= vertices.shape[0]:
-        return  # overflow: the counter keeps the true number for check_capacity()
-    vertices[slot] = ids
-    weights[slot] = w
-    multiplicity[slot] = merged
-    plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
-    normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
+            if contacts.vertex_face_toi[row] > 1.0:
+                continue
+            ids = vertex_face_vertices(contacts, row)
+        # Pairs made only of kinematic vertices: nothing can respond to them.
+        if kinematic[ids[0]] != 0 and kinematic[ids[1]] != 0 and kinematic[ids[2]] != 0 and kinematic[ids[3]] != 0:
+            continue
+        x0 = positions[ids[0]]
+        x1 = positions[ids[1]]
+        x2 = positions[ids[2]]
+        x3 = positions[ids[3]]
+        w = pair_weights(x0, x1, x2, x3, edge_edge)
+        key = wp.int64(-1)  # no merge: a face-interior or edges-interior contact, or merge off
+        if merge != 0:
+            if edge_edge != 0:
+                key = _edge_edge_key(ids, contacts.edge_edge[row], w)
+            else:
+                key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
+        merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
+        if key >= wp.int64(0):
+            found = _merge_slot(table, key)
+            if found[0] >= 0:
+                wp.atomic_add(table.counts, found[0], 1)
+                if found[1] == 0:
+                    continue  # counted in the spring of the row that put the key there
+                merged = -(found[0] + 2)
+        slot = wp.atomic_add(count, 0, 1)
+        if slot >= vertices.shape[0]:
+            continue  # overflow: the counter keeps the true number for check_capacity()
+        vertices[slot] = ids
+        weights[slot] = w
+        multiplicity[slot] = merged
+        plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
+        normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
 
 
 @wp.kernel
@@ -201,16 +208,16 @@ def _write_multiplicity(
     # in:
     counts: wp.array(dtype=wp.int32),
     count: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     multiplicity: wp.array(dtype=wp.int32),
 ):
-    """One thread per spring slot: a merged spring's table slot becomes the number of rows it stands for."""
-    c = wp.tid()
-    if c >= count[0]:
-        return
-    m = multiplicity[c]
-    if m < 0:
-        multiplicity[c] = counts[-m - 2]
+    """Row kernel (:mod:`pscc._lanes`) over the stored springs: a merged spring's table slot becomes the
+    number of rows it stands for."""
+    for c in range(wp.tid(), wp.min(count[0], multiplicity.shape[0]), lanes):
+        m = multiplicity[c]
+        if m < 0:
+            multiplicity[c] = counts[-m - 2]
 
 
 class ProximityContacts:
@@ -285,14 +292,14 @@ class ProximityContacts:
         table = springs.merge_table()
         table.keys.fill_(-1)
         table.counts.zero_()
-        for edge_edge, rows in ((0, contacts.vertex_face), (1, contacts.edge_edge)):
-            wp.launch(_append_contacts, dim=rows.shape[0],
-                      inputs=[contacts, self.kinematic_flags, positions, self.face_edges, edge_edge,
-                              int(self.merge)],
-                      outputs=[table, springs.vertices, springs.weights, springs.normals, springs.multiplicity,
-                               springs.count],
-                      device=self.device)
-        wp.launch(_write_multiplicity, dim=springs.capacity, inputs=[table.counts, springs.count],
+        lanes = row_lanes(self.device, contacts.vertex_face.shape[0] + contacts.edge_edge.shape[0])
+        wp.launch(_append_contacts, dim=lanes,
+                  inputs=[contacts, self.kinematic_flags, positions, self.face_edges, int(self.merge), lanes],
+                  outputs=[table, springs.vertices, springs.weights, springs.normals, springs.multiplicity,
+                           springs.count],
+                  device=self.device)
+        lanes = row_lanes(self.device, springs.capacity)
+        wp.launch(_write_multiplicity, dim=lanes, inputs=[table.counts, springs.count, lanes],
                   outputs=[springs.multiplicity], device=self.device)
         return springs
 
