@@ -1,7 +1,8 @@
 """The device path of the simulator: host traffic per step, graph replay against eager launches, memory.
 
 For each case the scene is simulated twice from its start, once replaying a recorded graph per frame
-(``Simulation(graph=True)``, the default) and once launching eagerly (``graph=False``). After a
+(``Simulation(graph=True)``, the default) and once launching eagerly (``graph=False``), the two runs
+interleaved frame by frame so that both meet the same load of the machine. After a
 warm-up (kernels load, buffers grow while contact builds up), the measured frames of the graph run
 are counted with :func:`pscc.bench.host_traffic.count_host_traffic` and checked by ipctk's
 ``has_intersections``; seconds per frame compare the two runs over the same frames.
@@ -50,19 +51,25 @@ def _intersection_free(sim: Simulation) -> bool:
 
 def run_case(name: str, triangles: int, warmup: int, frames: int, device: str,
              progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
-    """One scene: the graph run (traffic, checks, memory), then the eager run over the same frames."""
+    """One scene, simulated from its start with the graph (traffic, checks, memory) and eagerly, the two
+    runs interleaved frame by frame (which one goes first alternates), so that both see the same load of
+    the machine: on a shared machine the speed drifts by 10-20 % over minutes, which skewed the ratio
+    when one run followed the other."""
     row: dict[str, Any] = {"scene": name, "warmup_frames": warmup, "frames": frames, "error": None}
     seconds: dict[bool, list[float]] = {True: [], False: []}
     replayed: list[bool] = []
     traffic = {"reads": 0, "syncs": 0, "uploads": 0}
+    fallbacks = {True: 0, False: 0}
     try:
+        sims = {}
         for graph in (True, False):
             scene = _scene(name, triangles)
-            sim = Simulation(scene, device=device, graph=graph)
-            row["triangles"] = int(scene.faces.shape[0])
-            row["steps_per_frame"] = scene.steps_per_frame
-            fallbacks = 0
-            for frame in range(1, warmup + frames + 1):
+            sims[graph] = Simulation(scene, device=device, graph=graph)
+        row["triangles"] = int(scene.faces.shape[0])
+        row["steps_per_frame"] = scene.steps_per_frame
+        for frame in range(1, warmup + frames + 1):
+            for graph in ((True, False) if frame % 2 else (False, True)):
+                sim = sims[graph]
                 if frame > warmup and graph:
                     with count_host_traffic() as counts:
                         record = sim.step_frame()
@@ -75,13 +82,13 @@ def run_case(name: str, triangles: int, warmup: int, frames: int, device: str,
                     record = sim.step_frame()
                 if frame > warmup:
                     seconds[graph].append(record["seconds_total"])
-                    fallbacks += record["counts"]["device_fallbacks"]
+                    fallbacks[graph] += record["counts"]["device_fallbacks"]
                 progress(f"device path {name} {triangles} {'graph' if graph else 'eager'}: frame "
                          f"{frame}/{warmup + frames} {record['seconds_total']:.2f} s")
-            row["graph_fallbacks" if graph else "eager_fallbacks"] = fallbacks
-            if graph:
-                memory = sim.solver.device_bytes()
-                row["bytes_per_triangle"] = {k: v / row["triangles"] for k, v in memory.items()}
+        row["graph_fallbacks"] = fallbacks[True]
+        row["eager_fallbacks"] = fallbacks[False]
+        memory = sims[True].solver.device_bytes()
+        row["bytes_per_triangle"] = {k: v / row["triangles"] for k, v in memory.items()}
     except Exception as exc:  # SimulationError and friends: reported in the table
         row["error"] = f"{type(exc).__name__}: {exc}"
         return row
@@ -113,8 +120,9 @@ def report(results: dict[str, Any]) -> list[str]:
         f"Device: **{results['device']}**. `Simulation(scene)` runs every step on the device "
         "(`pscc/sim/device_step.py`) and reads one small report back per frame; after an eager frame it "
         "records the frame into a graph and replays it. Each scene is run from its start twice, with the graph "
-        "and with eager launches (`graph=False`); after the warm-up frames (kernels load, buffers grow while "
-        "contact builds up), the measured frames of the graph run are counted from outside with the same "
+        "and with eager launches (`graph=False`), the two runs interleaved frame by frame (alternating which goes "
+        "first) so that both meet the same load of the machine; after the warm-up frames (kernels load, buffers "
+        "grow while contact builds up), the measured frames of the graph run are counted from outside with the same "
         "patches as `../shared/tools/host_traffic.py` (reads: `.numpy()`/`.list()`; syncs; uploads: "
         "`assign`, `from_numpy`, arrays built from host data) and checked with ipctk's `has_intersections`. "
         "Seconds per frame are medians over the measured frames that the graph run replayed, the eager run's "
