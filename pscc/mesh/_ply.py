@@ -23,6 +23,13 @@ from pscc.errors import InputError
 from pscc.mesh.mesh_data import MeshData, _validate_mesh
 
 _PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")
+_PLY_UV_NAMES = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+"""Vertex property pairs read as texture coordinates (the first pair present), as PLY exporters write them."""
+
+
+def _uv_pair(names: Any) -> tuple[str, str] | None:
+    """The first texture-coordinate property pair among ``names``, or None."""
+    return next((pair for pair in _PLY_UV_NAMES if pair[0] in names and pair[1] in names), None)
 
 
 
@@ -229,12 +236,14 @@ def _ascii_floats(source: str, name: str, rows: list[list[str]], width: int, fir
 
 
 def _read_ply_ascii(source: str, elements: list[_PlyElement], text: str) -> tuple[np.ndarray, np.ndarray,
+                                                                                   np.ndarray | None,
                                                                                    np.ndarray | None]:
-    """Vertices, faces and optional object ids of an ASCII PLY body (one line per element row)."""
+    """Vertices, faces, optional object ids and optional uv of an ASCII PLY body (one line per element row)."""
     lines = text.splitlines()
     vertices = np.zeros((0, 3), dtype=np.float64)
     faces = np.zeros((0, 3), dtype=np.int64)
     object_ids = None
+    uv = None
     start = 0
     for element in elements:
         chunk = lines[start:start + element.count]
@@ -250,9 +259,12 @@ def _read_ply_ascii(source: str, elements: list[_PlyElement], text: str) -> tupl
                                      "write vertex positions as float properties x, y and z")
             _, values = _ascii_element(source, element, chunk)
             vertices = np.concatenate([values[axis] for axis in "xyz"], axis=1)
+            pair = _uv_pair({name for name, p in props.items() if p.count_type is None})
+            if pair is not None:
+                uv = np.concatenate([values[name] for name in pair], axis=1)
         elif element.name == "face" and element.count:
             faces, object_ids = _ascii_faces(source, element, chunk)
-    return vertices, faces, object_ids
+    return vertices, faces, object_ids, uv
 
 
 def _ascii_faces(source: str, element: _PlyElement, lines: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
@@ -314,10 +326,11 @@ def _ply_property(data: Any, name: str) -> np.ndarray:
     return np.asarray(data[name])
 
 
-def _ply_vertices(source: str, elements: Mapping[str, Any]) -> np.ndarray:
+def _ply_vertices(source: str, elements: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray | None]:
+    """Positions and optional texture coordinates of a binary PLY's vertex element."""
     element = elements.get("vertex")
     if element is None or not element.get("length"):
-        return np.zeros((0, 3), dtype=np.float32)
+        return np.zeros((0, 3), dtype=np.float32), None
     data = element.get("data")
     missing = [c for c in "xyz" if c not in element.get("properties", {})]
     if missing:
@@ -327,7 +340,9 @@ def _ply_vertices(source: str, elements: Mapping[str, Any]) -> np.ndarray:
         raise InputError(source, "vertex", "vertex data could not be read (file corrupt)",
                          "re-export the PLY file")
     try:
-        columns = [_ply_property(data, c).astype(np.float64).reshape(-1) for c in "xyz"]
+        pair = _uv_pair(element.get("properties", {}))
+        names = "xyz" if pair is None else ("x", "y", "z", *pair)
+        columns = [_ply_property(data, c).astype(np.float64).reshape(-1) for c in names]
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(source, "vertex", "vertex data is malformed or truncated",
                          "re-export the PLY file") from exc
@@ -335,7 +350,7 @@ def _ply_vertices(source: str, elements: Mapping[str, Any]) -> np.ndarray:
     if any(c.shape[0] != length for c in columns):
         raise InputError(source, "vertex", f"header declares {length} vertices but the data holds "
                          "a different number (file truncated or corrupt)", "re-export the PLY file")
-    return np.column_stack(columns)
+    return np.column_stack(columns[:3]), (None if pair is None else np.column_stack(columns[3:]))
 
 
 def _ply_faces(source: str, elements: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray | None]:
@@ -402,9 +417,9 @@ def load_ply(path: Path) -> MeshData:
     file_format, header_elements, body = _ply_header(source, data)
     if file_format == "ascii":
         text = data[body:].decode("utf-8", errors="replace")
-        vertices, faces, object_ids = _read_ply_ascii(source, header_elements, text)
+        vertices, faces, object_ids, uv = _read_ply_ascii(source, header_elements, text)
         return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
-                              object_ids=object_ids, face_label=None)
+                              object_ids=object_ids, face_label=None, uv=uv)
     _check_binary_face_lists(source, file_format, header_elements, data, body)
     try:
         with warnings.catch_warnings():
@@ -418,7 +433,7 @@ def load_ply(path: Path) -> MeshData:
     if elements is None:
         raise InputError(source, "file", "trimesh returned no raw PLY elements",
                          "install a trimesh version >= 4.0")
-    vertices = _ply_vertices(source, elements)
+    vertices, uv = _ply_vertices(source, elements)
     faces, object_ids = _ply_faces(source, elements)
     return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
-                          object_ids=object_ids, face_label=None)
+                          object_ids=object_ids, face_label=None, uv=uv)

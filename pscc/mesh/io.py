@@ -26,7 +26,7 @@ SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz")
 """File extensions :func:`load_mesh` understands (matched case-insensitively)."""
 
 _NPZ_REQUIRED = ("vertices", "faces")
-_NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids")
+_NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids", "uv")
 
 
 # --------------------------------------------------------------------------------------------
@@ -40,9 +40,12 @@ def load_mesh(path: str | os.PathLike[str]) -> MeshData:
     The format is chosen from the extension (case-insensitive). Vertex and face order are kept.
 
     * ``.obj``: ``v`` and triangular ``f`` lines (``i``, ``i/j``, ``i//k``, ``i/j/k``, negative
-      relative indices); each ``o`` or ``g`` line that follows a face starts a new object id.
-    * ``.ply``: ASCII or binary; a face property ``object_id`` becomes the object ids.
-    * ``.npz``: keys ``vertices`` and ``faces``, optional ``vertices_end``, ``rest``, ``object_ids``.
+      relative indices); each ``o`` or ``g`` line that follows a face starts a new object id; ``vt``
+      lines referenced by the faces become the vertices' ``uv``.
+    * ``.ply``: ASCII or binary; a face property ``object_id`` becomes the object ids, vertex
+      properties ``s, t`` (or ``u, v``, ``texture_u, texture_v``) the ``uv``.
+    * ``.npz``: keys ``vertices`` and ``faces``, optional ``vertices_end``, ``rest``, ``object_ids``,
+      ``uv``.
 
     Args:
         path: The mesh file.
@@ -130,6 +133,8 @@ def save_mesh_npz(path: str | os.PathLike[str], mesh: MeshData) -> None:
         arrays["vertices_end"] = mesh.vertices_end
     if mesh.rest is not None:
         arrays["rest"] = mesh.rest
+    if mesh.uv is not None:
+        arrays["uv"] = mesh.uv
     write_atomic(target, lambda stream: np.savez(stream, **arrays))
 
 
@@ -185,6 +190,8 @@ def _load_obj(path: Path) -> MeshData:
 
     coords: list[float] = []
     vertex_count = 0
+    texture: list[tuple[float, float]] = []  # the vt lines
+    corner_texture: list[int] = []  # per face corner: 0-based vt id, or -1 when the corner has none
     face_ids: list[int] = []
     face_lines: list[int] = []
     object_ids: list[int] = []
@@ -223,6 +230,7 @@ def _load_obj(path: Path) -> MeshData:
                 raise _obj_error(source, lineno, f"face has only {len(corners)} vertices",
                                  "give each face exactly 3 vertex indices, 'f i j k'")
             for corner in corners:
+                corner_texture.append(_obj_texture_index(source, lineno, corner, len(texture)))
                 head = corner.split("/", 1)[0]
                 try:
                     index = int(head)
@@ -257,7 +265,17 @@ def _load_obj(path: Path) -> MeshData:
             if face_since_object:
                 current_object += 1
                 face_since_object = False
-        # Everything else (vt, vn, vp, usemtl, mtllib, s, l, ...) carries nothing pscc needs.
+        elif keyword == "vt":
+            try:
+                u, v = float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0
+            except (IndexError, ValueError) as exc:
+                raise _obj_error(source, lineno, f"malformed texture coordinate line {line.strip()!r}",
+                                 "write texture coordinates as 'vt u v' with decimal numbers") from exc
+            if not (math.isfinite(u) and math.isfinite(v)):
+                raise _obj_error(source, lineno, f"texture coordinate {len(texture) + 1} holds NaN or Inf",
+                                 "remove or repair non-finite texture coordinates")
+            texture.append((u, v))
+        # Everything else (vn, vp, usemtl, mtllib, s, l, ...) carries nothing pscc needs.
 
     vertices = np.asarray(coords, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(face_ids, dtype=np.int64).reshape(-1, 3)
@@ -274,8 +292,64 @@ def _load_obj(path: Path) -> MeshData:
     def face_label(row: int) -> str:
         return f"row {row} (line {face_lines[row]})"
 
+    uv = _obj_vertex_uv(source, faces, np.asarray(corner_texture, dtype=np.int64).reshape(-1, 3), texture,
+                        face_lines, vertex_count)
     return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
-                          object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label)
+                          object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label, uv=uv)
+
+
+def _obj_texture_index(source: str, lineno: int, corner: str, texture_count: int) -> int:
+    """0-based ``vt`` id of a face corner ``v/vt``, ``v/vt/vn`` (-1 for ``v`` or ``v//vn``)."""
+    fields = corner.split("/")
+    if len(fields) < 2 or fields[1] == "":
+        return -1
+    try:
+        index = int(fields[1])
+    except ValueError as exc:
+        raise _obj_error(source, lineno, f"malformed texture coordinate index in face corner {corner!r}",
+                         "write face corners as v/vt or v/vt/vn with integer indices") from exc
+    resolved = index - 1 if index > 0 else texture_count + index
+    if index == 0 or not 0 <= resolved < texture_count:
+        raise _obj_error(source, lineno, f"face corner {corner!r} refers to texture coordinate {index}, but the "
+                         f"file defines {texture_count} 'vt' lines before it",
+                         "use texture coordinate indices between 1 and the number of 'vt' lines above the face")
+    return resolved
+
+
+def _obj_vertex_uv(source: str, faces: np.ndarray, corner_texture: np.ndarray, texture: list[tuple[float, float]],
+                   face_lines: list[int], vertex_count: int) -> np.ndarray | None:
+    """One (u, v) per vertex from the faces' ``v/vt`` corners; None when no face has texture coordinates.
+
+    A vertex used with two different texture coordinates (a UV seam through a shared vertex) or a face
+    without them next to faces with them is an error naming the vertex or the line. Vertices no face
+    uses get (0, 0).
+    """
+    if corner_texture.size == 0 or (corner_texture < 0).all():
+        return None
+    missing = np.flatnonzero((corner_texture < 0).any(axis=1))
+    if missing.size:
+        row = int(missing[0])
+        raise _obj_error(source, face_lines[row], "this face has no texture coordinates (v/vt) while other faces "
+                         "have them", "give every face corner a texture coordinate, or none at all")
+    table = np.asarray(texture, dtype=np.float64)
+    corner_uv = table[corner_texture.reshape(-1)]
+    vertex = faces.reshape(-1)
+    uv = np.zeros((vertex_count, 2), dtype=np.float64)
+    first = np.full(vertex_count, -1, dtype=np.int64)
+    order = np.arange(vertex.shape[0])
+    first[vertex[::-1]] = order[::-1]  # the first corner of each vertex
+    uv[vertex] = corner_uv[first[vertex]]
+    clash = np.flatnonzero((corner_uv != uv[vertex]).any(axis=1))
+    if clash.size:
+        corner = int(clash[0])
+        v = int(vertex[corner])
+        raise _obj_error(source, face_lines[corner // 3],
+                         f"vertex {v + 1} has texture coordinates {corner_uv[corner].tolist()} here but "
+                         f"{uv[v].tolist()} in the face at line {face_lines[int(first[v]) // 3]}: one vertex with two "
+                         "different (u, v) (a UV seam through a shared vertex)",
+                         "split the vertex along the seam (one vertex per texture coordinate, as sewn-pattern "
+                         "garment files do) and join the pieces with stitches, or use rest = \"mesh\" instead of uv")
+    return uv
 
 
 # --------------------------------------------------------------------------------------------
@@ -319,4 +393,4 @@ def _load_npz(path: Path) -> MeshData:
         arrays.update({key: _npz_array(archive, key, source, required=False) for key in _NPZ_OPTIONAL})
     return _validate_mesh(arrays["vertices"], arrays["faces"], source=source,
                           vertices_end=arrays["vertices_end"], rest=arrays["rest"],
-                          object_ids=arrays["object_ids"], face_label=None)
+                          object_ids=arrays["object_ids"], face_label=None, uv=arrays["uv"])

@@ -45,6 +45,9 @@ class MeshData:
         rest: (n, 2) or (n, 3) float32 material-space coordinates, or None.
         object_ids: (m,) int32 object id of each face.
         source: The file path the mesh came from, or ``"argument"``.
+        uv: (n, 2) float32 texture coordinates of each vertex (OBJ ``vt``, PLY ``s, t`` or ``u, v``,
+            NPZ ``uv``), or None. Scene files can take a garment's rest shape from them
+            (``rest = "uv"``).
     """
 
     vertices: np.ndarray
@@ -53,6 +56,7 @@ class MeshData:
     rest: np.ndarray | None
     object_ids: np.ndarray
     source: str
+    uv: np.ndarray | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -108,6 +112,7 @@ def _validate_mesh(
     rest: Any,
     object_ids: Any,
     face_label: Callable[[int], str] | None,
+    uv: Any = None,
 ) -> MeshData:
     """Implementation of :func:`validate_mesh`; ``face_label`` names a face row in messages.
 
@@ -203,6 +208,13 @@ def _validate_mesh(
                              f"has {rest_arr.shape[0]} rows but the mesh has {n} vertices",
                              "give one rest coordinate per vertex, in the same order as vertices")
 
+    uv_arr = None
+    if uv is not None:
+        uv_arr = _check_point_array(uv, "uv", source, (2,))
+        if uv_arr.shape[0] != n:
+            raise InputError(source, "uv", f"has {uv_arr.shape[0]} rows but the mesh has {n} vertices",
+                             "give one (u, v) texture coordinate per vertex, in the same order as vertices")
+
     # --- object ids -----------------------------------------------------------------------
     if object_ids is None:
         ids = np.zeros(m, dtype=np.int32)
@@ -210,7 +222,7 @@ def _validate_mesh(
         ids = check_object_ids(object_ids, m, source=source, row_label=label)
 
     return MeshData(vertices=verts, faces=tris, vertices_end=end, rest=rest_arr, object_ids=ids,
-                    source=source)
+                    source=source, uv=uv_arr)
 
 
 def validate_mesh(
@@ -221,6 +233,7 @@ def validate_mesh(
     vertices_end: Any = None,
     rest: Any = None,
     object_ids: Any = None,
+    uv: Any = None,
 ) -> MeshData:
     """Check mesh arrays and return them as a :class:`MeshData`.
 
@@ -238,6 +251,7 @@ def validate_mesh(
         vertices_end: Optional (n, 3) real positions at the end of the step.
         rest: Optional (n, 2) or (n, 3) real material-space coordinates.
         object_ids: Optional (m,) integer object id >= 0 per face; zeros when omitted.
+        uv: Optional (n, 2) real texture coordinates, one per vertex.
 
     Returns:
         The validated mesh.
@@ -258,4 +272,4 @@ def validate_mesh(
         (3, 1, 1)
     """
     return _validate_mesh(vertices, faces, source=source, vertices_end=vertices_end, rest=rest,
-                          object_ids=object_ids, face_label=None)
+                          object_ids=object_ids, face_label=None, uv=uv)
