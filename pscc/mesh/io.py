@@ -192,6 +192,7 @@ def _load_obj(path: Path) -> MeshData:
     vertex_count = 0
     texture: list[tuple[float, float]] = []  # the vt lines
     corner_texture: list[int] = []  # per face corner: 0-based vt id, or -1 when the corner has none
+    uv_issue: str | None = None  # the first bad vt reference (the texture coordinates are then unusable)
     face_ids: list[int] = []
     face_lines: list[int] = []
     object_ids: list[int] = []
@@ -230,7 +231,11 @@ def _load_obj(path: Path) -> MeshData:
                 raise _obj_error(source, lineno, f"face has only {len(corners)} vertices",
                                  "give each face exactly 3 vertex indices, 'f i j k'")
             for corner in corners:
-                corner_texture.append(_obj_texture_index(source, lineno, corner, len(texture)))
+                texture_id = _obj_texture_index(lineno, corner, len(texture))
+                if isinstance(texture_id, str):
+                    uv_issue = uv_issue or texture_id
+                    texture_id = -1
+                corner_texture.append(texture_id)
                 head = corner.split("/", 1)[0]
                 try:
                     index = int(head)
@@ -292,45 +297,48 @@ def _load_obj(path: Path) -> MeshData:
     def face_label(row: int) -> str:
         return f"row {row} (line {face_lines[row]})"
 
-    uv = _obj_vertex_uv(source, faces, np.asarray(corner_texture, dtype=np.int64).reshape(-1, 3), texture,
-                        face_lines, vertex_count)
+    uv = None
+    if uv_issue is None:
+        uv, uv_issue = _obj_vertex_uv(np.asarray(corner_texture, dtype=np.int64).reshape(-1, 3), faces, texture,
+                                      face_lines, vertex_count)
     return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
-                          object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label, uv=uv)
+                          object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label, uv=uv,
+                          uv_issue=uv_issue)
 
 
-def _obj_texture_index(source: str, lineno: int, corner: str, texture_count: int) -> int:
-    """0-based ``vt`` id of a face corner ``v/vt``, ``v/vt/vn`` (-1 for ``v`` or ``v//vn``)."""
+def _obj_texture_index(lineno: int, corner: str, texture_count: int) -> int | str:
+    """0-based ``vt`` id of a face corner ``v/vt`` or ``v/vt/vn``; -1 for ``v`` or ``v//vn``; a message
+    (naming the line) when the corner's ``vt`` index is malformed or names no ``vt`` line above it."""
     fields = corner.split("/")
     if len(fields) < 2 or fields[1] == "":
         return -1
     try:
         index = int(fields[1])
-    except ValueError as exc:
-        raise _obj_error(source, lineno, f"malformed texture coordinate index in face corner {corner!r}",
-                         "write face corners as v/vt or v/vt/vn with integer indices") from exc
+    except ValueError:
+        return f"line {lineno}: malformed texture coordinate index in face corner {corner!r}"
     resolved = index - 1 if index > 0 else texture_count + index
     if index == 0 or not 0 <= resolved < texture_count:
-        raise _obj_error(source, lineno, f"face corner {corner!r} refers to texture coordinate {index}, but the "
-                         f"file defines {texture_count} 'vt' lines before it",
-                         "use texture coordinate indices between 1 and the number of 'vt' lines above the face")
+        return (f"line {lineno}: face corner {corner!r} refers to texture coordinate {index}, but the file defines "
+                f"{texture_count} 'vt' lines before it")
     return resolved
 
 
-def _obj_vertex_uv(source: str, faces: np.ndarray, corner_texture: np.ndarray, texture: list[tuple[float, float]],
-                   face_lines: list[int], vertex_count: int) -> np.ndarray | None:
-    """One (u, v) per vertex from the faces' ``v/vt`` corners; None when no face has texture coordinates.
+def _obj_vertex_uv(corner_texture: np.ndarray, faces: np.ndarray, texture: list[tuple[float, float]],
+                   face_lines: list[int], vertex_count: int) -> tuple[np.ndarray | None, str | None]:
+    """One (u, v) per vertex from the faces' ``v/vt`` corners, or None and why not.
 
-    A vertex used with two different texture coordinates (a UV seam through a shared vertex) or a face
-    without them next to faces with them is an error naming the vertex or the line. Vertices no face
-    uses get (0, 0).
+    None without a reason when no face has texture coordinates; None with the reason (naming the line
+    and the vertex) when a face lacks them next to faces with them, or a vertex is used with two
+    different (u, v) (a UV seam through a shared vertex). Neither stops the mesh from loading: only a
+    rest shape taken from the uv needs them. Vertices no face uses get (0, 0).
     """
     if corner_texture.size == 0 or (corner_texture < 0).all():
-        return None
+        return None, None
     missing = np.flatnonzero((corner_texture < 0).any(axis=1))
     if missing.size:
         row = int(missing[0])
-        raise _obj_error(source, face_lines[row], "this face has no texture coordinates (v/vt) while other faces "
-                         "have them", "give every face corner a texture coordinate, or none at all")
+        return None, (f"line {face_lines[row]}: this face has no texture coordinates (v/vt) while other faces "
+                      "have them")
     table = np.asarray(texture, dtype=np.float64)
     corner_uv = table[corner_texture.reshape(-1)]
     vertex = faces.reshape(-1)
@@ -343,13 +351,11 @@ def _obj_vertex_uv(source: str, faces: np.ndarray, corner_texture: np.ndarray, t
     if clash.size:
         corner = int(clash[0])
         v = int(vertex[corner])
-        raise _obj_error(source, face_lines[corner // 3],
-                         f"vertex {v + 1} has texture coordinates {corner_uv[corner].tolist()} here but "
-                         f"{uv[v].tolist()} in the face at line {face_lines[int(first[v]) // 3]}: one vertex with two "
-                         "different (u, v) (a UV seam through a shared vertex)",
-                         "split the vertex along the seam (one vertex per texture coordinate, as sewn-pattern "
-                         "garment files do) and join the pieces with stitches, or use rest = \"mesh\" instead of uv")
-    return uv
+        return None, (f"line {face_lines[corner // 3]}: vertex {v + 1} has texture coordinates "
+                      f"{corner_uv[corner].tolist()} here but {uv[v].tolist()} in the face at line "
+                      f"{face_lines[int(first[v]) // 3]}: one vertex with two different (u, v) (a UV seam through a "
+                      "shared vertex)")
+    return uv, None
 
 
 # --------------------------------------------------------------------------------------------

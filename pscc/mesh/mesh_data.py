@@ -48,6 +48,9 @@ class MeshData:
         uv: (n, 2) float32 texture coordinates of each vertex (OBJ ``vt``, PLY ``s, t`` or ``u, v``,
             NPZ ``uv``), or None. Scene files can take a garment's rest shape from them
             (``rest = "uv"``).
+        uv_issue: why the file's texture coordinates are not one (u, v) per vertex (then ``uv`` is
+            None), naming the line and the vertex; None when they are or when there are none. Only a
+            rest shape taken from the uv needs them, so this does not stop the mesh from loading.
     """
 
     vertices: np.ndarray
@@ -57,6 +60,7 @@ class MeshData:
     object_ids: np.ndarray
     source: str
     uv: np.ndarray | None = None
+    uv_issue: str | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -113,6 +117,7 @@ def _validate_mesh(
     object_ids: Any,
     face_label: Callable[[int], str] | None,
     uv: Any = None,
+    uv_issue: str | None = None,
 ) -> MeshData:
     """Implementation of :func:`validate_mesh`; ``face_label`` names a face row in messages.
 
@@ -222,7 +227,7 @@ def _validate_mesh(
         ids = check_object_ids(object_ids, m, source=source, row_label=label)
 
     return MeshData(vertices=verts, faces=tris, vertices_end=end, rest=rest_arr, object_ids=ids,
-                    source=source, uv=uv_arr)
+                    source=source, uv=uv_arr, uv_issue=uv_issue)
 
 
 def validate_mesh(

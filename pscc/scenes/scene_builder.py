@@ -67,12 +67,18 @@ SIDES: tuple[str, ...] = ("left", "right", "bottom", "top")
 CORNERS: tuple[str, ...] = ("bottom-left", "bottom-right", "top-left", "top-right")
 """Corner names of the ``corner`` selector (rest coordinates; bottom/top = v, left/right = u)."""
 
-_REST_MODES: tuple[str, ...] = ("auto", "file", "plane")
+_REST_MODES: tuple[str, ...] = ("auto", "uv", "file", "plane", "mesh")
+_REST_BENDING: tuple[str, ...] = ("mesh", "flat")
+UV_AREA_RATIO_LIMIT: float = 4.0
+"""``rest = "uv"`` is refused when the pattern's area (times ``uv_scale`` squared) and the mesh's differ by
+more than this factor: the texture coordinates are then not in metres (the message gives the
+``uv_scale`` that matches the areas)."""
 
 _TOP_KEYS = ("scene", "solver", "contact", "cloth", "obstacle")
 _SCENE_KEYS = ("name", "description", "frame_rate", "frame_time", "steps_per_frame", "frames")
 _PLACEMENT_KEYS = ("translate", "rotate", "scale")
-_CLOTH_KEYS = ("name", "mesh", "rest", "sheet", *_PLACEMENT_KEYS, "material", "pins", "handles")
+_CLOTH_KEYS = ("name", "mesh", "rest", "uv_scale", "rest_bending", "sheet", *_PLACEMENT_KEYS, "material", "pins",
+               "handles")
 _SHEET_KEYS = ("size", "cells")
 _HANDLE_KEYS = ("name", "vertices", "times", "translations", "rotations", "pivot")
 _OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", *_PLACEMENT_KEYS, "keyframes")
@@ -111,8 +117,9 @@ class _Piece:
     name: str
     vertices: np.ndarray  # (n, 3) float32, placed
     faces: np.ndarray  # (m, 3) int32
-    rest: np.ndarray  # (n, 2) float32
+    rest: np.ndarray  # (n, 2) pattern or (n, 3) rest shape, float32
     material: ClothMaterial
+    flat_bending: bool = False  # rest angles 0 although the rest shape is 3-D
     handles: list[tuple[str, np.ndarray, Any]] = field(default_factory=list)  # (name, local ids, motion or None)
 
 
@@ -320,12 +327,15 @@ class SceneBuilder:
         if not spec["obstacle"]:
             del spec["obstacle"]
 
-        vertices, faces, rest, object_ids, handles = [], [], [], [], []
+        vertices, faces, rest, object_ids, handles, flat_bending = [], [], [], [], [], []
         offset = 0
+        rest_dimension = max(piece.rest.shape[1] for piece in pieces)  # 3 when a piece keeps its 3-D shape
         for index, piece in enumerate(pieces):
             vertices.append(piece.vertices)
             faces.append(piece.faces + offset)
-            rest.append(piece.rest)
+            # A flat pattern in a 3-D rest space: (u, v, 0), the same triangles and zero rest angles.
+            rest.append(np.pad(piece.rest, ((0, 0), (0, rest_dimension - piece.rest.shape[1]))))
+            flat_bending.append(np.full(piece.faces.shape[0], piece.flat_bending))
             object_ids.append(np.full(piece.faces.shape[0], index, dtype=np.int32))
             for name, ids, motion in piece.handles:
                 handles.append(Handle(ids + offset, static_motion if motion is None else motion, name=name))
@@ -338,6 +348,7 @@ class SceneBuilder:
             object_ids=np.concatenate(object_ids),
             material=[piece.material for piece in pieces], solver=solver, handles=handles,
             obstacles=obstacles, frame_time=frame_time, steps_per_frame=scene_spec["steps_per_frame"],
+            flat_bending=np.concatenate(flat_bending) if any(piece.flat_bending for piece in pieces) else None,
         )
         options = {"frames": scene_spec["frames"], "source": self.source}
         return SceneFile(path=self.path, spec=spec, scene=scene, contact=contact, options=options)
@@ -441,9 +452,10 @@ class SceneBuilder:
                              "with size = [w, h] and cells = [nx, ny]")
         placement, rotation, translation, scale = self.placement(raw, key)
         if "sheet" in raw:
-            if "rest" in raw:
-                raise self.error(f"{key}.rest", "rest applies to mesh pieces only",
-                                 "remove it (a sheet's rest shape is the flat grid)")
+            for mesh_only in ("rest", "uv_scale", "rest_bending"):
+                if mesh_only in raw:
+                    raise self.error(f"{key}.{mesh_only}", f"{mesh_only} applies to mesh pieces only",
+                                     "remove it (a sheet's rest shape is the flat grid)")
             sheet = self.table(raw["sheet"], f"{key}.sheet", "{ size = [1.0, 1.0], cells = [20, 20] }")
             self.check_keys(sheet, _SHEET_KEYS, f"{key}.sheet")
             for required in _SHEET_KEYS:
@@ -469,20 +481,56 @@ class SceneBuilder:
             local = mesh.vertices.astype(np.float64)
             faces = mesh.faces
             requested = mode
-            rest, mode = self.mesh_rest(mesh, mode, scale, f"{key}.rest", str(mesh_path))
+            uv_scale = self.number(raw.get("uv_scale", 1.0), f"{key}.uv_scale", minimum=0.0)
+            if "uv_scale" in raw and mode not in ("uv", "auto"):
+                raise self.error(f"{key}.uv_scale", f"uv_scale applies to rest = \"uv\" only, not {mode!r}",
+                                 "remove it, or set rest = \"uv\"")
+            rest, mode = self.mesh_rest(mesh, mode, scale, uv_scale, key, str(mesh_path))
             self.check_rest_triangles(rest, mesh, requested, mode, f"{key}.rest", str(mesh_path))
             spec["mesh"] = str(mesh_path)
             spec["rest"] = mode
+            if mode == "uv":
+                spec["uv_scale"] = uv_scale
+            if "rest_bending" in raw and mode != "mesh":
+                raise self.error(f"{key}.rest_bending", f"rest_bending applies to rest = \"mesh\" only (this piece's "
+                                 f"rest is {mode!r}, flat, so its bending rest angles are 0)",
+                                 "remove it, or set rest = \"mesh\"")
+            if mode == "mesh":
+                spec["rest_bending"] = self.string(raw.get("rest_bending", "mesh"), f"{key}.rest_bending",
+                                                   _REST_BENDING)
         vertices = (scale * local) @ rotation.T + translation
         spec.update(placement)
         material, spec["material"] = self.config(raw.get("material", {}), f"{key}.material", ClothMaterial)
         piece = _Piece(name=name, vertices=vertices.astype(np.float32), faces=np.asarray(faces, np.int32),
-                       rest=np.asarray(rest, dtype=np.float32), material=material)
+                       rest=np.asarray(rest, dtype=np.float32), material=material,
+                       flat_bending=spec.get("rest_bending") == "flat")
         self.cloth_handles(raw, piece, key, spec)
         return piece, spec
 
-    def mesh_rest(self, mesh: Any, mode: str, scale: float, key: str, mesh_path: str) -> tuple[np.ndarray, str]:
-        """Rest (u, v) coordinates of a mesh piece and the resolved mode (``file`` or ``plane``)."""
+    def mesh_rest(self, mesh: Any, mode: str, scale: float, uv_scale: float, piece_key: str,
+                  mesh_path: str) -> tuple[np.ndarray, str]:
+        """Rest coordinates of a mesh piece and the resolved mode.
+
+        ``uv``: the file's texture coordinates times ``uv_scale`` (metres per uv unit); ``file``: the NPZ
+        ``rest`` times the placement scale; ``plane``: the positions projected onto their best-fit plane;
+        ``mesh``: the positions themselves, (n, 3) (each triangle keeps its own rest shape). ``auto`` takes
+        uv, then the NPZ rest, then the plane when the mesh is flat, and refuses a curved mesh without
+        either.
+        """
+        key = f"{piece_key}.rest"
+        if mode == "uv" or (mode == "auto" and mesh.uv is not None):
+            if mesh.uv is None and mesh.uv_issue is not None:
+                raise self.error(key, f"rest = \"uv\" but the texture coordinates of {mesh_path!r} are not one (u, v) "
+                                 f"per vertex: {mesh.uv_issue}",
+                                 "split the vertices along the UV seams (one vertex per texture coordinate, as sewn-"
+                                 "pattern garment files do) and join the pieces with stitches, or use rest = \"mesh\"")
+            if mesh.uv is None:
+                raise self.error(key, f"rest = \"uv\" but {mesh_path!r} has no texture coordinates",
+                                 "export the garment with its UV layout (OBJ 'vt' lines and f v/vt faces, PLY s,t "
+                                 "properties or an NPZ 'uv' key), or use rest = \"mesh\" to take the mesh's own shape")
+            return self.uv_rest(mesh, scale, uv_scale, piece_key, mesh_path), "uv"
+        if mode == "mesh":
+            return mesh.vertices.astype(np.float64) * scale, "mesh"
         has_rest = mesh.rest is not None
         if mode == "file" or (mode == "auto" and has_rest):
             if not has_rest:
@@ -501,13 +549,37 @@ class SceneBuilder:
         positions = mesh.vertices.astype(np.float64) * scale
         flat, distance, size = _plane_coordinates(positions)
         if mode == "auto" and distance > FLATNESS_TOLERANCE * size:
-            raise self.error(key, f"{mesh_path!r} has no rest coordinates and is not flat (a vertex is "
-                             f"{distance:.3g} m from the best-fit plane of the positions, more than "
+            unusable = "" if mesh.uv_issue is None else f" (its texture coordinates cannot be: {mesh.uv_issue})"
+            raise self.error(key, f"{mesh_path!r} has no usable texture or rest coordinates{unusable} and is not flat "
+                             f"(a vertex is {distance:.3g} m from the best-fit plane of the positions, more than "
                              f"{FLATNESS_TOLERANCE:g} x the mesh size), so its rest shape is unknown",
-                             "use an NPZ file with a 'rest' key of (n, 2) (u, v) coordinates in metres, or set "
-                             "rest = \"plane\" to use the projection onto the best-fit plane anyway (this "
-                             "distorts the rest lengths of curved parts)")
+                             "set rest = \"mesh\" to take the mesh's own curved shape as the rest shape (what "
+                             "cloth tools do for a garment without a pattern), give the file its UV layout "
+                             "(rest = \"uv\"), or set rest = \"plane\" to use the projection onto the best-fit "
+                             "plane anyway (this distorts the rest lengths of curved parts)")
         return flat, "plane"
+
+    def uv_rest(self, mesh: Any, scale: float, uv_scale: float, piece_key: str, mesh_path: str) -> np.ndarray:
+        """The texture coordinates times ``uv_scale`` as the pattern, refused when their area and the placed
+        mesh's differ by more than :data:`UV_AREA_RATIO_LIMIT` (uv not in metres: the message gives the
+        ``uv_scale`` that matches the areas)."""
+        pattern = mesh.uv.astype(np.float64) * uv_scale
+        corners = pattern[mesh.faces.astype(np.int64)]
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        pattern_area = 0.5 * float(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+        placed = mesh.vertices.astype(np.float64)[mesh.faces.astype(np.int64)] * scale
+        mesh_area = 0.5 * float(np.linalg.norm(np.cross(placed[:, 1] - placed[:, 0], placed[:, 2] - placed[:, 0]),
+                                               axis=1).sum())
+        if pattern_area > 0.0 and mesh_area > 0.0:
+            ratio = pattern_area / mesh_area
+            if not 1.0 / UV_AREA_RATIO_LIMIT <= ratio <= UV_AREA_RATIO_LIMIT:
+                matching = uv_scale * (mesh_area / pattern_area) ** 0.5
+                raise self.error(f"{piece_key}.uv_scale", f"the texture coordinates of {mesh_path!r} times uv_scale = "
+                                 f"{uv_scale:g} cover {pattern_area:.4g} m^2, {ratio:.3g} times the mesh's "
+                                 f"{mesh_area:.4g} m^2: they are not a pattern in metres",
+                                 f"set uv_scale = {matching:.6g} (metres per uv unit; this matches the areas), or use "
+                                 "rest = \"mesh\"")
+        return pattern
 
     def check_rest_triangles(self, rest: np.ndarray, mesh: MeshData, requested: str, mode: str, key: str,
                              mesh_path: str) -> None:
@@ -532,6 +604,13 @@ class SceneBuilder:
                              "area: the mesh is too curved for that projection to be its rest shape",
                              "store (n, 2) (u, v) rest coordinates (e.g. its UV unwrap, in metres) in an NPZ "
                              "'rest' key and use rest = \"file\"")
+        if mode == "uv":
+            raise self.error(key, f"the texture coordinates give {where} zero area",
+                             "give every face three distinct, non-collinear (u, v) in the UV layout, or use "
+                             "rest = \"mesh\"")
+        if mode == "mesh":
+            raise self.error(key, f"rest = \"mesh\" takes the mesh's own shape, in which {where} has zero area",
+                             "remove the zero-area faces from the mesh, or give it a UV layout (rest = \"uv\")")
         raise self.error(key, f"the rest coordinates in the file give {where} zero area",
                          "give every face three non-collinear (u, v) rest coordinates in the NPZ 'rest' key, or "
                          "remove that face")
@@ -614,6 +693,8 @@ class SceneBuilder:
                 selected.append(self.ids(item["ids"], n, f"{where}.ids"))
             if "side" in item or "corner" in item:
                 rest = piece.rest.astype(np.float64)
+                if rest.shape[1] == 3:  # a 3-D rest shape: sides and corners of its best-fit plane
+                    rest = _plane_coordinates(rest)[0]
                 low, high = rest.min(axis=0), rest.max(axis=0)
                 extent = float((high - low).max())
             if "side" in item:

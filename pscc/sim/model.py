@@ -145,6 +145,8 @@ class ClothModel:
         pinned: Optional vertex ids or (n,) boolean mask of vertices held at their initial positions.
         handles: Optional vertex ids whose positions are prescribed at each step
             (see :meth:`pscc.sim.ImplicitEuler.step`); they start at their initial positions.
+        flat_bending: Optional (m,) bool: faces whose hinges bend towards flat (rest angle 0) although
+            ``rest`` is 3-D (a garment whose curved shape sets its rest lengths but not its folds).
         device: Warp device.
 
     Raises:
@@ -154,7 +156,8 @@ class ClothModel:
 
     def __init__(self, vertices: Any, faces: Any, *, rest: Any = None,
                  materials: ClothMaterial | Sequence[ClothMaterial] | None = None, object_ids: Any = None,
-                 pinned: Any = None, handles: Any = None, device: wp.DeviceLike = None) -> None:
+                 pinned: Any = None, handles: Any = None, flat_bending: Any = None,
+                 device: wp.DeviceLike = None) -> None:
         mesh = validate_mesh(vertices, faces, rest=rest, object_ids=object_ids)
         self.device = wp.get_device(device)
         self.mesh = mesh
@@ -211,6 +214,12 @@ class ClothModel:
         hinges = self._hinge_vertices(tris, topology.edges[interior].astype(np.int64), first, second)
         if rest_coords.shape[1] == 3:
             rest_angle = _dihedral_angles(*(rest_coords[hinges[:, k]] for k in range(4)))
+            if flat_bending is not None:
+                flat = np.asarray(flat_bending, dtype=bool).reshape(-1)
+                if flat.shape[0] != m:
+                    raise InputError("argument", "flat_bending", f"has {flat.shape[0]} entries for {m} faces",
+                                     "give one bool per face")
+                rest_angle = np.where(flat[first] | flat[second], 0.0, rest_angle)
         else:
             rest_angle = np.zeros(hinges.shape[0])
         rest_length = np.linalg.norm(rest_coords[hinges[:, 1]] - rest_coords[hinges[:, 0]], axis=1)

@@ -19,7 +19,8 @@ class Scene:
         description: one line for ``pscc scenes`` and the stats.
         vertices: (n, 3) float32 initial cloth positions [m].
         faces: (m, 3) int32 cloth triangles.
-        rest: (n, 2) float32 material (flat rest) coordinates [m].
+        rest: (n, 2) float32 material (flat pattern) coordinates [m], or an (n, 3) rest shape [m] (each
+            triangle's rest shape is its own; bending rest angles from the dihedral angles of that shape).
         object_ids: (m,) int32 cloth piece of each face.
         material: the cloth material of every piece, or a list indexed by ``object_ids`` (one
             material per piece). The contact distance is the largest thickness.
@@ -28,6 +29,8 @@ class Scene:
         obstacles: animated rigid obstacles.
         frame_time: time between written frames [s].
         steps_per_frame: time steps per frame (dt = frame_time / steps_per_frame).
+        flat_bending: optional (m,) bool: faces whose bending rest angles are 0 although the rest
+            shape is 3-D (hinges with such a face bend towards flat).
     """
 
     name: str
@@ -42,6 +45,7 @@ class Scene:
     obstacles: list[Obstacle] = field(default_factory=list)
     frame_time: float = 1.0 / 30.0
     steps_per_frame: int = 8
+    flat_bending: np.ndarray | None = None
 
     @property
     def time_step(self) -> float:

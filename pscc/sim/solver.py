@@ -136,10 +136,16 @@ class ClothSolver:
         self._obstacle_offsets = offsets
         vertices = np.concatenate([np.asarray(scene.vertices, np.float32), *obstacle_positions], axis=0)
         rest = np.asarray(scene.rest, dtype=np.float32)
-        if rest.ndim != 2 or rest.shape != (cloth_count, 2):
-            raise InputError(scene.name, "rest", f"shape {rest.shape} is not ({cloth_count}, 2)",
-                             "give (u, v) material coordinates per cloth vertex")
-        rest_all = np.concatenate([rest, *(p[:, :2] for p in obstacle_positions)], axis=0)
+        if rest.ndim != 2 or rest.shape[0] != cloth_count or rest.shape[1] not in (2, 3):
+            raise InputError(scene.name, "rest", f"shape {rest.shape} is not ({cloth_count}, 2) or ({cloth_count}, 3)",
+                             "give (u, v) pattern coordinates or a 3-D rest position per cloth vertex")
+        rest_all = np.concatenate([rest, *(p[:, :rest.shape[1]] for p in obstacle_positions)], axis=0)
+        flat_bending = None
+        if scene.flat_bending is not None:
+            flat_bending = np.asarray(scene.flat_bending, dtype=bool).reshape(-1)
+            if flat_bending.shape[0] != scene.faces.shape[0]:
+                raise InputError(scene.name, "flat_bending", f"has {flat_bending.shape[0]} entries for "
+                                 f"{scene.faces.shape[0]} cloth faces", "give one bool per cloth face, or None")
         handle_ids = [h.vertices for h in scene.handles]
         for handle in scene.handles:
             if handle.vertices.max() >= cloth_count:
@@ -153,7 +159,7 @@ class ClothSolver:
             self.model = ClothModel(vertices, scene.faces, rest=rest_all,
                                     materials=materials if per_object else materials[0],
                                     object_ids=scene.object_ids if per_object else None,
-                                    handles=all_handles, device=self.device)
+                                    handles=all_handles, flat_bending=flat_bending, device=self.device)
         except InputError as error:
             if error.source != "argument":
                 raise

@@ -60,6 +60,9 @@ def _assert_same_scene(a: Scene, b: Scene) -> None:
                                                                          b.steps_per_frame)
     for name in ("vertices", "faces", "rest", "object_ids"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert (a.flat_bending is None) == (b.flat_bending is None)
+    if a.flat_bending is not None:
+        np.testing.assert_array_equal(a.flat_bending, b.flat_bending)
     assert a.material == b.material and a.solver == b.solver
     assert [h.name for h in a.handles] == [h.name for h in b.handles]
     times = (0.0, 0.013, 0.5, 1.7, 10.0)
