@@ -20,6 +20,7 @@ import numpy as np
 
 from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
+from pscc.mesh.animation import ANIMATION_EXTENSIONS, Animation, load_animation
 from pscc.mesh.generate import grid_sheet, icosphere
 from pscc.mesh.io import SUPPORTED_EXTENSIONS, load_mesh
 from pscc.mesh.mesh_data import MeshData
@@ -81,7 +82,8 @@ _CLOTH_KEYS = ("name", "mesh", "rest", "uv_scale", "rest_bending", "sheet", *_PL
                "handles")
 _SHEET_KEYS = ("size", "cells")
 _HANDLE_KEYS = ("name", "vertices", "times", "translations", "rotations", "pivot")
-_OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", *_PLACEMENT_KEYS, "keyframes")
+_OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", "sequence_frame_rate", "sequence_prim",
+                  *_PLACEMENT_KEYS, "keyframes")
 _OBSTACLE_SHAPES = ("mesh", "sphere", "box", "sequence")
 _SPHERE_KEYS = ("radius", "subdivisions")
 _BOX_KEYS = ("size",)
@@ -806,15 +808,35 @@ class SceneBuilder:
                              "box = { size = [1.0, 1.0, 0.1] } or sequence = \"body/frame_*.obj\"")
         shape = shapes[0]
         placement, rotation, translation, scale = self.placement(raw, key)
+        for sequence_only in ("sequence_frame_rate", "sequence_prim"):
+            if sequence_only in raw and shape != "sequence":
+                raise self.error(f"{key}.{sequence_only}", f"{sequence_only} applies to sequence obstacles only",
+                                 "remove it, or give the body as sequence = \"body.usd\" (or frame files)")
         if shape == "sequence":
             if "keyframes" in raw:
                 raise self.error(f"{key}.keyframes", "a mesh sequence cannot also have keyframes",
                                  "remove keyframes (the sequence's files give the motion) or use mesh = \"file\"")
-            files, frames, faces = self.sequence(raw["sequence"], f"{key}.sequence")
+            animation = self.animation(raw, key)
+            if animation is not None:
+                frames, faces, file_rate = animation.frames, animation.faces, animation.frame_rate
+                spec["sequence"] = animation.source
+                if "sequence_prim" in raw:
+                    spec["sequence_prim"] = raw["sequence_prim"]
+            else:
+                files, frames, faces = self.sequence(raw["sequence"], f"{key}.sequence")
+                spec["sequence"] = [str(f) for f in files]
+                file_rate = None
+            rate = file_rate
+            if "sequence_frame_rate" in raw:
+                rate = self.number(raw["sequence_frame_rate"], f"{key}.sequence_frame_rate", minimum=0.0,
+                                   example="30.0")
+            sequence_time = frame_time  # frame k of the sequence plays at scene frame k
+            if rate is not None:
+                sequence_time = 1.0 / rate
+                spec["sequence_frame_rate"] = rate
             placed = (scale * frames) @ rotation.T + translation
-            spec["sequence"] = [str(f) for f in files]
             spec.update(placement)
-            return SequenceObstacle(placed, faces, frame_time=frame_time, name=name), spec
+            return SequenceObstacle(placed, faces, frame_time=sequence_time, name=name), spec
         if shape == "mesh":
             mesh_path, mesh = self.mesh(raw["mesh"], f"{key}.mesh")
             local, faces = mesh.vertices.astype(np.float64), mesh.faces
@@ -849,6 +871,32 @@ class SceneBuilder:
             motion = self.keyframed_motion(keyframes, f"{key}.keyframes", offset=translation)
             return Obstacle(shaped, faces, motion=motion, name=name), spec
         return Obstacle(shaped + translation, faces, name=name), spec
+
+    def animation(self, raw: Mapping[str, Any], key: str) -> Animation | None:
+        """The animation file of ``sequence = "body.usd"`` (or an NPZ with a ``frames`` key), or None when
+        the sequence is a list or pattern of per-frame mesh files."""
+        value = raw["sequence"]
+        if not isinstance(value, str) or any(c in value for c in "*?[") \
+                or Path(value).suffix.lower() not in ANIMATION_EXTENSIONS:
+            if "sequence_prim" in raw:
+                raise self.error(f"{key}.sequence_prim", "sequence_prim applies to a USD animation only",
+                                 "remove it, or give the body as sequence = \"body.usd\"")
+            return None
+        path = self.file_path(value, f"{key}.sequence")
+        if path.suffix.lower() == ".npz":
+            try:
+                with np.load(path, allow_pickle=False) as archive:
+                    if "frames" not in archive.files:
+                        return None  # one mesh file: a sequence of one frame
+            except (OSError, ValueError, EOFError):
+                return None  # the mesh loader names the problem
+        prim = None
+        if "sequence_prim" in raw:
+            prim = self.string(raw["sequence_prim"], f"{key}.sequence_prim")
+        try:
+            return load_animation(path, prim)
+        except InputError as error:
+            raise self.error(f"{key}.sequence", f"{str(path)!r}: {error.field}: {error.problem}", error.fix) from None
 
     def sequence(self, value: Any, key: str) -> tuple[list[Path], np.ndarray, np.ndarray]:
         """Files, (k, n, 3) float64 positions and faces of a mesh sequence (glob pattern or list of files)."""
