@@ -13,6 +13,7 @@ import warp as wp
 
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.seams import SeamAdjacency, SeamArgs, stitched, stitched_to_face
 from pscc.geometry.aabb import boxes_overlap
 
 wp.set_module_options({"enable_backward": False})
@@ -33,12 +34,13 @@ def _vertex_face_pairs(
     vertex_upper: wp.array(dtype=wp.vec3),
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
+    seams: SeamArgs,
     first_vertex: int,
     # out:
     counts: wp.array(dtype=wp.int32),
     pairs: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per (vertex, block of BLOCK faces)."""
+    """One thread per (vertex, block of BLOCK faces); pairs sharing or stitched to a vertex are skipped."""
     row, block = wp.tid()
     v = first_vertex + row
     if vertex_used[v] == 0:
@@ -52,6 +54,8 @@ def _vertex_face_pairs(
         tri = faces[f]
         if tri[0] == v or tri[1] == v or tri[2] == v:
             continue
+        if stitched_to_face(seams, v, tri):
+            continue
         if boxes_overlap(lo, hi, face_lower[f], face_upper[f]):
             slot = wp.atomic_add(counts, 0, 1)
             if slot < pairs.shape[0]:
@@ -64,12 +68,14 @@ def _edge_edge_pairs(
     edges: wp.array(dtype=wp.vec2i),
     edge_lower: wp.array(dtype=wp.vec3),
     edge_upper: wp.array(dtype=wp.vec3),
+    seams: SeamArgs,
     first_edge: int,
     # out:
     counts: wp.array(dtype=wp.int32),
     pairs: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per (edge a, block of BLOCK edges b), testing only b > a."""
+    """One thread per (edge a, block of BLOCK edges b), testing only b > a; pairs sharing or stitched to a
+    vertex are skipped."""
     row, block = wp.tid()
     a = first_edge + row
     ea = edges[a]
@@ -81,6 +87,9 @@ def _edge_edge_pairs(
     for b in range(begin, end):
         eb = edges[b]
         if ea[0] == eb[0] or ea[0] == eb[1] or ea[1] == eb[0] or ea[1] == eb[1]:
+            continue
+        if (stitched(seams, ea[0], eb[0]) or stitched(seams, ea[0], eb[1]) or stitched(seams, ea[1], eb[0])
+                or stitched(seams, ea[1], eb[1])):
             continue
         if boxes_overlap(lo, hi, edge_lower[b], edge_upper[b]):
             slot = wp.atomic_add(counts, 1, 1)
@@ -95,12 +104,15 @@ class BroadPhaseBruteForce:
         boxes: the primitive boxes it reads (filled by the caller each call).
         vertex_used: (vertex_count,) int32, 1 for vertices of at least one face.
         device: Warp device.
+        seams: the stitch partners of the vertices (:mod:`pscc.collision.seams`); None: no stitches.
     """
 
-    def __init__(self, boxes: PrimitiveBoxes, vertex_used: wp.array, device: wp.Device) -> None:
+    def __init__(self, boxes: PrimitiveBoxes, vertex_used: wp.array, device: wp.Device,
+                 seams: SeamAdjacency | None = None) -> None:
         self.boxes = boxes
         self.vertex_used = vertex_used
         self.device = device
+        self.seams = seams if seams is not None else SeamAdjacency(None, 0, device)
 
     def bounding_volume_tests(self, vertex_count: int, face_count: int, edge_count: int) -> int:
         """Box tests one call performs (all pairs; shared-vertex pairs are skipped before the test
@@ -126,12 +138,12 @@ class BroadPhaseBruteForce:
             count = min(rows, vertex_count - first)
             wp.launch(_vertex_face_pairs, dim=(count, face_blocks),
                       inputs=[boxes.faces, self.vertex_used, boxes.vertex_lower, boxes.vertex_upper,
-                              boxes.face_lower, boxes.face_upper, first],
+                              boxes.face_lower, boxes.face_upper, self.seams.args, first],
                       outputs=[candidates.counts, candidates.vertex_face], device=self.device)
         edge_blocks = (edge_count + BLOCK - 1) // BLOCK
         rows = max(1, TESTS_PER_LAUNCH // max(1, edge_count))
         for first in range(0, edge_count, rows):
             count = min(rows, edge_count - first)
             wp.launch(_edge_edge_pairs, dim=(count, edge_blocks),
-                      inputs=[boxes.edges, boxes.edge_lower, boxes.edge_upper, first],
+                      inputs=[boxes.edges, boxes.edge_lower, boxes.edge_upper, self.seams.args, first],
                       outputs=[candidates.counts, candidates.edge_edge], device=self.device)

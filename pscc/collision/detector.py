@@ -35,6 +35,7 @@ from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.narrow_phase import NarrowPhase
+from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
@@ -94,6 +95,8 @@ class CollisionDetector:
             faces are never tested against each other.
         shrink_interval: ``pscc`` shrinks its test front every this many calls.
         cell_size_factor: k of the grid-size heuristic, cell = k x mean box axis length.
+        stitches: optional (s, 4) rows ``(i, j, k, r)`` (vertex i sewn to (1 - r) x_j + r x_k): the
+            features a stitch joins are never reported (:mod:`pscc.collision.seams`).
 
     Coordinate range: the kernels compute in float32, so every call that takes positions refuses
     arrays whose largest |coordinate| exceeds :data:`pscc.tolerances.MAX_COORDINATE` (1e9 length
@@ -120,6 +123,7 @@ class CollisionDetector:
         rigid_objects: Any = (),
         shrink_interval: int = 5,
         cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
+        stitches: Any = None,
     ) -> None:
         if method not in METHODS:
             raise InputError("argument", "method", f"unknown method {method!r}",
@@ -145,6 +149,7 @@ class CollisionDetector:
         self._faces_np = np.ascontiguousarray(faces_np, dtype=np.int32)
         self._object_ids_np = None if object_ids is None else check_object_ids(object_ids, faces_np.shape[0])
         self._rest = None if rest is None else as_numpy(rest)
+        self._stitches = None if stitches is None else as_numpy(stitches)
         try:
             self._rigid_objects = frozenset(int(o) for o in rigid_objects)
         except (TypeError, ValueError) as exc:
@@ -190,6 +195,8 @@ class CollisionDetector:
         self._previous_t0 = wp.full(vertex_count, wp.vec3(math.nan, math.nan, math.nan), dtype=wp.vec3,
                                     device=device)
         self._previous_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
+        self.seams = SeamAdjacency(self._stitches, vertex_count, device)
+        """The stitch partners of each vertex (pairs a stitch joins are left out)."""
         self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
         self._feature_boxes = self.boxes.as_struct()
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
@@ -199,14 +206,14 @@ class CollisionDetector:
         if self.method == "brute-force":
             used = (np.diff(self.topology.vertex_face_offsets) > 0).astype(np.int32)
             self._vertex_used = wp.array(used, dtype=wp.int32, device=device)
-            self.brute_force = BroadPhaseBruteForce(self.boxes, self._vertex_used, device)
+            self.brute_force = BroadPhaseBruteForce(self.boxes, self._vertex_used, device, self.seams)
             return
         # The detector sorts its final rows, so the hash's own pair sort is not needed.
         self.spatial_hash = SpatialHash(mesh.face_count, device, self._cell_size_factor, sort_pairs=False,
                                         faces=self._faces, group_slab_test=self.method == "pscc")
         if self._lent_scratch is not None or self._lend_pair_buffers:
             self.spatial_hash.lend_scratch(self._lent_scratch, self._scratch_source())
-        self.feature_pairs = FeaturePairs(mesh.faces, self.device_topology, device)
+        self.feature_pairs = FeaturePairs(mesh.faces, self.device_topology, device, self.seams)
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
@@ -692,7 +699,7 @@ class CollisionDetector:
         """Device memory per structure, in bytes, and their ``total``."""
         sizes = {
             "mesh": sum(a.capacity for a in self.device_topology.arrays) + self._object_ids.capacity
-            + self._positions_t0.capacity + self._positions_t1.capacity,
+            + self._positions_t0.capacity + self._positions_t1.capacity + self.seams.device_bytes,
             "boxes": self.boxes.device_bytes,
             "candidates": self.candidates.device_bytes,
             "narrow_phase": self.narrow.device_bytes + self._previous_t0.capacity + self._previous_t1.capacity,

@@ -42,6 +42,7 @@ from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.pair_filter import triangle_pair_separated
+from pscc.collision.seams import SeamAdjacency, SeamArgs, stitched, stitched_to_face
 from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.ccd import CcdParameters, ccd_parameters
 from pscc.mesh.topology import MeshTopology
@@ -70,9 +71,9 @@ def _shares_vertex(f: wp.vec3i, v: int) -> bool:
 
 @wp.func
 def _owned_vertex_mask(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
-                       boxes: PrimitiveBoxArgs, owner: int, other: int) -> int:
-    """Bit k: vertex k of face ``owner`` is owned by it, is not a vertex of face ``other``, and its box
-    overlaps the box of ``other``."""
+                       boxes: PrimitiveBoxArgs, seams: SeamArgs, owner: int, other: int) -> int:
+    """Bit k: vertex k of face ``owner`` is owned by it, is not a vertex of face ``other`` nor stitched to
+    one, and its box overlaps the box of ``other``."""
     tri = faces[owner]
     target = faces[other]
     bits = owned_vertex_bits[owner]
@@ -82,7 +83,7 @@ def _owned_vertex_mask(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.ar
     for k in range(3):
         if (bits >> k) & 1:
             v = tri[k]
-            if not _shares_vertex(target, v):
+            if not _shares_vertex(target, v) and not stitched_to_face(seams, v, target):
                 if boxes_overlap(boxes.vertex_lower[v], boxes.vertex_upper[v], other_lower, other_upper):
                     mask = mask | (1 << k)
     return mask
@@ -115,6 +116,7 @@ class FeatureTopology:
     edges: wp.array(dtype=wp.vec2i)
     owned_vertex_bits: wp.array(dtype=wp.int32)
     owned_edge_bits: wp.array(dtype=wp.int32)
+    seams: SeamArgs
 
 
 @wp.kernel
@@ -143,6 +145,8 @@ def _extract_features(
     edges = topology.edges
     owned_vertex_bits = topology.owned_vertex_bits
     owned_edge_bits = topology.owned_edge_bits
+    seams = topology.seams
+    has_seams = seams.offsets.shape[0] > 1
     rows = int(wp.min(pair_counts[0], wp.int64(triangle_pairs.shape[0])))
     for i in range(wp.tid(), rows, lanes):
         pair = triangle_pairs[i]
@@ -151,8 +155,8 @@ def _extract_features(
         same_object = planes.object_ids[a] == planes.object_ids[b]
         if same_object:
             wp.atomic_add(pair_stats, 2, 1)
-        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, a, b)
-        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, b, a)
+        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, a, b)
+        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, b, a)
         vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
         # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests.
         bits_a = owned_edge_bits[a]
@@ -182,6 +186,10 @@ def _extract_features(
                     if (bits_b >> k) & 1:
                         shared = (ends_a[0] == ends_b0[k] or ends_a[0] == ends_b1[k] or ends_a[1] == ends_b0[k]
                                   or ends_a[1] == ends_b1[k])
+                        if not shared and has_seams:
+                            shared = (stitched(seams, ends_a[0], ends_b0[k]) or stitched(seams, ends_a[0], ends_b1[k])
+                                      or stitched(seams, ends_a[1], ends_b0[k])
+                                      or stitched(seams, ends_a[1], ends_b1[k]))
                         if not shared and boxes_overlap(lower_a, upper_a, lower_b[k], upper_b[k]):
                             edge_mask = edge_mask | (1 << (3 * j + k))
         ee = int(0)
@@ -236,9 +244,11 @@ class FeaturePairs:
         faces: (face_count, 3) int32 host faces.
         device_topology: those faces' topology on the device (shared with the caller, not copied).
         device: Warp device.
+        seams: the stitch partners of the vertices (:mod:`pscc.collision.seams`); None: no stitches.
     """
 
-    def __init__(self, faces: np.ndarray, device_topology: DeviceTopology, device: wp.Device) -> None:
+    def __init__(self, faces: np.ndarray, device_topology: DeviceTopology, device: wp.Device,
+                 seams: SeamAdjacency | None = None) -> None:
         self.device = device
         device_topology.check_same(faces, wp.get_device(device), "feature pair extraction")
         vertex_bits, edge_bits = ownership_bits(faces, device_topology.topology)
@@ -254,6 +264,9 @@ class FeaturePairs:
         self.topology.edges = self.edges
         self.topology.owned_vertex_bits = self.owned_vertex_bits
         self.topology.owned_edge_bits = self.owned_edge_bits
+        self.seams = seams if seams is not None else SeamAdjacency(None, 0, device)
+        """Stitch partners: the feature pairs a stitch joins are not candidates."""
+        self.topology.seams = self.seams.args
         self.pair_stats = wp.zeros(3, dtype=wp.int32, device=device)
         # The host API's pair count, handed to the device path like a broad phase's counter.
         self._host_pair_count = wp.zeros(1, dtype=wp.int64, device=device)

@@ -57,6 +57,7 @@ import warp as wp
 from pscc._checks import check_object_ids, check_points
 from pscc._lanes import row_lanes
 from pscc.collision.device_topology import DeviceTopology
+from pscc.collision.seams import SeamAdjacency, SeamArgs, stitched_to_face
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import CapacityError, InputError
 from pscc.geometry.segment_triangle import segment_triangle_classify
@@ -119,6 +120,7 @@ class EdgeTopologyArgs:
     face_edges: wp.array(dtype=wp.vec3i)
     edges: wp.array(dtype=wp.vec2i)
     edge_owner: wp.array(dtype=wp.int32)
+    seams: SeamArgs
 
 
 @wp.kernel
@@ -157,6 +159,8 @@ def _test_face_pairs(
     face_edges = topology.face_edges
     edge_owner = topology.edge_owner
     edges = topology.edges
+    seams = topology.seams
+    has_seams = seams.offsets.shape[0] > 1
     rows = int(wp.min(pair_counts[0], wp.int64(face_pairs.shape[0])))
     for i in range(wp.tid(), rows, lanes):
         pair = face_pairs[i]
@@ -173,6 +177,9 @@ def _test_face_pairs(
                 if (ev[0] == fv[0] or ev[0] == fv[1] or ev[0] == fv[2] or ev[1] == fv[0] or ev[1] == fv[1]
                         or ev[1] == fv[2]):
                     continue
+                if has_seams:
+                    if stitched_to_face(seams, ev[0], fv) or stitched_to_face(seams, ev[1], fv):
+                        continue
                 r = segment_triangle_classify(positions[ev[0]], positions[ev[1]],
                                               positions[fv[0]], positions[fv[1]], positions[fv[2]])
                 if r[0] > 0.5:
@@ -208,6 +215,9 @@ class IntersectionCheck:
         face_boxes: two (face_count,) ``wp.vec3`` buffers for the face boxes, lent by a caller that needs
             nothing in them while the check runs and never reads what it leaves (e.g. the detector's
             face boxes, which its next broad phase computes anew), or ``None`` (buffers of its own).
+        seams: the stitch partners of the vertices (:mod:`pscc.collision.seams`): an edge with an end
+            stitched to a vertex of a face is not tested against it (a closed seam touches there); None:
+            no stitches.
 
     Raises:
         InputError: invalid faces, vertex count, object ids or options.
@@ -227,6 +237,7 @@ class IntersectionCheck:
         spatial_hash: SpatialHash | None = None,
         device_topology: DeviceTopology | None = None,
         face_boxes: tuple[wp.array, wp.array] | None = None,
+        seams: SeamAdjacency | None = None,
     ) -> None:
         if isinstance(vertex_count, bool) or not isinstance(vertex_count, int | np.integer) or vertex_count < 0:
             raise InputError("argument", "vertex_count", f"{vertex_count!r} is not an integer >= 0",
@@ -278,6 +289,8 @@ class IntersectionCheck:
         self._topology.face_edges = self.face_edges
         self._topology.edges = self.edges
         self._topology.edge_owner = self.edge_owner
+        self.seams = seams if seams is not None else SeamAdjacency(None, 0, dev)
+        self._topology.seams = self.seams.args
         self._allocate_hits(int(hit_capacity))
         self._hit_total = 0
         self._hit_reruns = 0

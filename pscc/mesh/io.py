@@ -20,13 +20,13 @@ from pscc._atomic import write_atomic
 from pscc._checks import INT32_MAX, check_coordinate_range, check_points, read_input_bytes, shorten
 from pscc.errors import InputError
 from pscc.mesh._ply import load_ply
-from pscc.mesh.mesh_data import MeshData, _validate_mesh
+from pscc.mesh.mesh_data import MeshData, _validate_mesh, check_stitches
 
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz")
 """File extensions :func:`load_mesh` understands (matched case-insensitively)."""
 
 _NPZ_REQUIRED = ("vertices", "faces")
-_NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids", "uv")
+_NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids", "uv", "stitches")
 
 
 # --------------------------------------------------------------------------------------------
@@ -41,11 +41,12 @@ def load_mesh(path: str | os.PathLike[str]) -> MeshData:
 
     * ``.obj``: ``v`` and triangular ``f`` lines (``i``, ``i/j``, ``i//k``, ``i/j/k``, negative
       relative indices); each ``o`` or ``g`` line that follows a face starts a new object id; ``vt``
-      lines referenced by the faces become the vertices' ``uv``.
+      lines referenced by the faces become the vertices' ``uv``; ``stitch i j k r`` lines (0-based ids,
+      the convention of Codim-IPC's garment inputs) the ``stitches``.
     * ``.ply``: ASCII or binary; a face property ``object_id`` becomes the object ids, vertex
       properties ``s, t`` (or ``u, v``, ``texture_u, texture_v``) the ``uv``.
     * ``.npz``: keys ``vertices`` and ``faces``, optional ``vertices_end``, ``rest``, ``object_ids``,
-      ``uv``.
+      ``uv``, ``stitches``.
 
     Args:
         path: The mesh file.
@@ -135,6 +136,8 @@ def save_mesh_npz(path: str | os.PathLike[str], mesh: MeshData) -> None:
         arrays["rest"] = mesh.rest
     if mesh.uv is not None:
         arrays["uv"] = mesh.uv
+    if mesh.stitches is not None:
+        arrays["stitches"] = mesh.stitches
     write_atomic(target, lambda stream: np.savez(stream, **arrays))
 
 
@@ -193,6 +196,8 @@ def _load_obj(path: Path) -> MeshData:
     texture: list[tuple[float, float]] = []  # the vt lines
     corner_texture: list[int] = []  # per face corner: 0-based vt id, or -1 when the corner has none
     uv_issue: str | None = None  # the first bad vt reference (the texture coordinates are then unusable)
+    stitches: list[list[float]] = []  # 'stitch i j k r' lines
+    stitch_lines: list[int] = []
     face_ids: list[int] = []
     face_lines: list[int] = []
     object_ids: list[int] = []
@@ -270,6 +275,16 @@ def _load_obj(path: Path) -> MeshData:
             if face_since_object:
                 current_object += 1
                 face_since_object = False
+        elif keyword == "stitch":
+            try:
+                if len(parts) != 5:
+                    raise ValueError
+                stitches.append([float(int(parts[1])), float(int(parts[2])), float(int(parts[3])), float(parts[4])])
+            except ValueError as exc:
+                raise _obj_error(source, lineno, f"malformed stitch line {line.strip()!r}",
+                                 "write stitches as 'stitch i j k r': 0-based vertex ids, vertex i sewn to "
+                                 "(1 - r) x_j + r x_k") from exc
+            stitch_lines.append(lineno)
         elif keyword == "vt":
             try:
                 u, v = float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0
@@ -301,9 +316,16 @@ def _load_obj(path: Path) -> MeshData:
     if uv_issue is None:
         uv, uv_issue = _obj_vertex_uv(np.asarray(corner_texture, dtype=np.int64).reshape(-1, 3), faces, texture,
                                       face_lines, vertex_count)
+    stitch_rows = None
+    if stitches:
+        try:
+            stitch_rows = check_stitches(np.asarray(stitches), vertex_count, source)
+        except InputError as error:  # name the line: "stitch 3 ..." -> the file's line of stitch 3
+            row = int(error.problem.split()[1]) if error.problem.startswith("stitch ") else 0
+            raise _obj_error(source, stitch_lines[row], error.problem, error.fix) from None
     return _validate_mesh(vertices, faces, source=source, vertices_end=None, rest=None,
                           object_ids=np.asarray(object_ids, dtype=np.int64), face_label=face_label, uv=uv,
-                          uv_issue=uv_issue)
+                          uv_issue=uv_issue, stitches=stitch_rows)
 
 
 def _obj_texture_index(lineno: int, corner: str, texture_count: int) -> int | str:
@@ -399,4 +421,5 @@ def _load_npz(path: Path) -> MeshData:
         arrays.update({key: _npz_array(archive, key, source, required=False) for key in _NPZ_OPTIONAL})
     return _validate_mesh(arrays["vertices"], arrays["faces"], source=source,
                           vertices_end=arrays["vertices_end"], rest=arrays["rest"],
-                          object_ids=arrays["object_ids"], face_label=None, uv=arrays["uv"])
+                          object_ids=arrays["object_ids"], face_label=None, uv=arrays["uv"],
+                          stitches=arrays["stitches"])

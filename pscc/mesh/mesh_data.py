@@ -51,6 +51,9 @@ class MeshData:
         uv_issue: why the file's texture coordinates are not one (u, v) per vertex (then ``uv`` is
             None), naming the line and the vertex; None when they are or when there are none. Only a
             rest shape taken from the uv needs them, so this does not stop the mesh from loading.
+        stitches: (s, 4) float64 rows ``(i, j, k, r)``: vertex i is sewn to the point (1 - r) x_j + r x_k
+            (OBJ ``stitch i j k r`` lines with 0-based ids, NPZ ``stitches``), or None. Ids are distinct,
+            in range, and r is in [0, 1].
     """
 
     vertices: np.ndarray
@@ -61,6 +64,7 @@ class MeshData:
     source: str
     uv: np.ndarray | None = None
     uv_issue: str | None = None
+    stitches: np.ndarray | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -118,6 +122,7 @@ def _validate_mesh(
     face_label: Callable[[int], str] | None,
     uv: Any = None,
     uv_issue: str | None = None,
+    stitches: Any = None,
 ) -> MeshData:
     """Implementation of :func:`validate_mesh`; ``face_label`` names a face row in messages.
 
@@ -220,6 +225,8 @@ def _validate_mesh(
             raise InputError(source, "uv", f"has {uv_arr.shape[0]} rows but the mesh has {n} vertices",
                              "give one (u, v) texture coordinate per vertex, in the same order as vertices")
 
+    stitch_rows = None if stitches is None else check_stitches(stitches, n, source)
+
     # --- object ids -----------------------------------------------------------------------
     if object_ids is None:
         ids = np.zeros(m, dtype=np.int32)
@@ -227,7 +234,44 @@ def _validate_mesh(
         ids = check_object_ids(object_ids, m, source=source, row_label=label)
 
     return MeshData(vertices=verts, faces=tris, vertices_end=end, rest=rest_arr, object_ids=ids,
-                    source=source, uv=uv_arr, uv_issue=uv_issue)
+                    source=source, uv=uv_arr, uv_issue=uv_issue, stitches=stitch_rows)
+
+
+def check_stitches(stitches: Any, vertex_count: int, source: str, field: str = "stitches") -> np.ndarray:
+    """Check (s, 4) stitch rows ``(i, j, k, r)`` (vertex i sewn to (1 - r) x_j + r x_k) and return them as
+    float64 with whole-number ids. An empty array is fine.
+
+    Raises:
+        InputError: not (s, 4) finite numbers, an id that is not a whole number in [0, vertex_count),
+            i equal to j or k, or r outside [0, 1]; the message names the row.
+    """
+    rows = _to_array(stitches, field, source, "(s, 4)")
+    if rows.size == 0:
+        return np.zeros((0, 4), dtype=np.float64)
+    if rows.ndim != 2 or rows.shape[1] != 4 or rows.dtype.kind not in "iuf":
+        raise InputError(source, field, f"shape {rows.shape} / dtype {rows.dtype} is not (s, 4) numbers",
+                         "give one row (i, j, k, r) per stitch: vertex i sewn to (1 - r) x_j + r x_k")
+    rows = rows.astype(np.float64)
+    if not np.all(np.isfinite(rows)):
+        row = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
+        raise InputError(source, field, f"stitch {row} holds NaN or Inf", "repair that stitch")
+    ids = rows[:, :3]
+    bad = np.flatnonzero(((ids != np.round(ids)) | (ids < 0) | (ids >= vertex_count)).any(axis=1))
+    if bad.size:
+        row = int(bad[0])
+        raise InputError(source, field, f"stitch {row} {rows[row].tolist()} has a vertex id that is not a whole "
+                         f"number in [0, {vertex_count})", "use 0-based vertex ids of the mesh")
+    bad = np.flatnonzero((ids[:, 0] == ids[:, 1]) | (ids[:, 0] == ids[:, 2]))
+    if bad.size:
+        row = int(bad[0])
+        raise InputError(source, field, f"stitch {row} {rows[row].tolist()} sews vertex {int(ids[row, 0])} to itself",
+                         "sew a vertex to a point of another edge")
+    bad = np.flatnonzero((rows[:, 3] < 0.0) | (rows[:, 3] > 1.0))
+    if bad.size:
+        row = int(bad[0])
+        raise InputError(source, field, f"stitch {row} has r = {rows[row, 3]!r} outside [0, 1]",
+                         "give r in [0, 1]: the point (1 - r) x_j + r x_k of the edge")
+    return rows
 
 
 def validate_mesh(
@@ -239,6 +283,7 @@ def validate_mesh(
     rest: Any = None,
     object_ids: Any = None,
     uv: Any = None,
+    stitches: Any = None,
 ) -> MeshData:
     """Check mesh arrays and return them as a :class:`MeshData`.
 
@@ -257,6 +302,8 @@ def validate_mesh(
         rest: Optional (n, 2) or (n, 3) real material-space coordinates.
         object_ids: Optional (m,) integer object id >= 0 per face; zeros when omitted.
         uv: Optional (n, 2) real texture coordinates, one per vertex.
+        stitches: Optional (s, 4) rows ``(i, j, k, r)``: vertex i sewn to (1 - r) x_j + r x_k
+            (:func:`check_stitches`).
 
     Returns:
         The validated mesh.
@@ -277,4 +324,4 @@ def validate_mesh(
         (3, 1, 1)
     """
     return _validate_mesh(vertices, faces, source=source, vertices_end=vertices_end, rest=rest,
-                          object_ids=object_ids, face_label=None, uv=uv)
+                          object_ids=object_ids, face_label=None, uv=uv, stitches=stitches)

@@ -122,6 +122,7 @@ class _Piece:
     rest: np.ndarray  # (n, 2) pattern or (n, 3) rest shape, float32
     material: ClothMaterial
     flat_bending: bool = False  # rest angles 0 although the rest shape is 3-D
+    stitches: np.ndarray | None = None  # (s, 4) rows (i, j, k, r), local ids
     handles: list[tuple[str, np.ndarray, Any]] = field(default_factory=list)  # (name, local ids, motion or None)
 
 
@@ -329,7 +330,7 @@ class SceneBuilder:
         if not spec["obstacle"]:
             del spec["obstacle"]
 
-        vertices, faces, rest, object_ids, handles, flat_bending = [], [], [], [], [], []
+        vertices, faces, rest, object_ids, handles, flat_bending, stitches = [], [], [], [], [], [], []
         offset = 0
         rest_dimension = max(piece.rest.shape[1] for piece in pieces)  # 3 when a piece keeps its 3-D shape
         for index, piece in enumerate(pieces):
@@ -338,6 +339,8 @@ class SceneBuilder:
             # A flat pattern in a 3-D rest space: (u, v, 0), the same triangles and zero rest angles.
             rest.append(np.pad(piece.rest, ((0, 0), (0, rest_dimension - piece.rest.shape[1]))))
             flat_bending.append(np.full(piece.faces.shape[0], piece.flat_bending))
+            if piece.stitches is not None and piece.stitches.shape[0]:
+                stitches.append(piece.stitches + np.array([offset, offset, offset, 0.0]))
             object_ids.append(np.full(piece.faces.shape[0], index, dtype=np.int32))
             for name, ids, motion in piece.handles:
                 handles.append(Handle(ids + offset, static_motion if motion is None else motion, name=name))
@@ -351,6 +354,7 @@ class SceneBuilder:
             material=[piece.material for piece in pieces], solver=solver, handles=handles,
             obstacles=obstacles, frame_time=frame_time, steps_per_frame=scene_spec["steps_per_frame"],
             flat_bending=np.concatenate(flat_bending) if any(piece.flat_bending for piece in pieces) else None,
+            stitches=np.concatenate(stitches) if stitches else None,
         )
         options = {"frames": scene_spec["frames"], "source": self.source}
         return SceneFile(path=self.path, spec=spec, scene=scene, contact=contact, options=options)
@@ -505,7 +509,8 @@ class SceneBuilder:
         material, spec["material"] = self.config(raw.get("material", {}), f"{key}.material", ClothMaterial)
         piece = _Piece(name=name, vertices=vertices.astype(np.float32), faces=np.asarray(faces, np.int32),
                        rest=np.asarray(rest, dtype=np.float32), material=material,
-                       flat_bending=spec.get("rest_bending") == "flat")
+                       flat_bending=spec.get("rest_bending") == "flat",
+                       stitches=None if "sheet" in raw else mesh.stitches)
         self.cloth_handles(raw, piece, key, spec)
         return piece, spec
 

@@ -85,6 +85,8 @@ class StepParams:
     air_drag: float  # [kg/(m^2 s)]
     contact_stiffness: float  # [N/m]; <= 0 selects the automatic per-contact stiffness
     contact_stiffness_scale: float  # dimensionless
+    stitch_stiffness_scale: float  # dimensionless
+    sewing_step: float  # [m]: the largest stitch offset a step's force sees (sewing_speed x dt)
     friction_epsilon: float  # eps_v [m/s]
     hinge_degeneracy_ratio: float  # dimensionless
 
@@ -377,6 +379,52 @@ def _assemble_contacts(
 
 
 @wp.kernel
+def _assemble_stitches(
+    # in:
+    stitches: ContactArrays,
+    vertices: VertexArrays,
+    positions: wp.array(dtype=wp.vec3),
+    v_ref: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    lanes: int,
+    # out:
+    coefficients: wp.array(dtype=wp.vec2),
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """Row kernel (:mod:`pscc._lanes`) over the stitches: zero-length springs between vertex i and its seam
+    point, ``E = k/2 |d|^2`` with ``d = sum_a w_a x_a``, isotropic (K = dt^2 k I, stored as alpha = beta) and
+    ``k = stitch_stiffness_scale m_eff / dt^2``. The force sees ``d`` clamped to ``sewing_step`` in length
+    (an open seam closes at most that much per step)."""
+    for c in range(wp.tid(), _contact_rows(stitches), lanes):
+        ids = stitches.vertices[c]
+        w = stitches.weights[c]
+        offset = wp.vec3(0.0)
+        relative_velocity = wp.vec3(0.0)
+        inverse_mass = float(0.0)
+        for a in range(4):
+            offset = offset + w[a] * positions[ids[a]]
+            relative_velocity = relative_velocity + w[a] * v_ref[ids[a]]
+            mass = vertices.mass[ids[a]]
+            if vertices.kind[ids[a]] == _FREE and mass > 0.0:
+                inverse_mass = inverse_mass + w[a] * w[a] / mass
+        if inverse_mass <= 0.0:
+            coefficients[c] = wp.vec2(0.0)
+            continue
+        dt = params.dt
+        stiffness = params.stitch_stiffness_scale / (inverse_mass * dt * dt)
+        length = wp.length(offset)
+        if length > params.sewing_step:
+            offset = offset * (params.sewing_step / length)
+        coefficient = wp.vec2(dt * dt * stiffness, dt * dt * stiffness)
+        coefficients[c] = coefficient
+        known = coefficient[0] * relative_velocity
+        for a in range(4):
+            _emit_force(ids[a], (-stiffness * w[a]) * offset, dt, vertices.kind, rhs)
+            if vertices.kind[ids[a]] == _FREE:
+                wp.atomic_sub(rhs, ids[a], w[a] * known)
+
+
+@wp.kernel
 def _element_matrix_times(
     # in:
     offsets: wp.array(dtype=wp.int32),
@@ -479,7 +527,7 @@ class ImplicitSystem:
     """Owns the element matrix, the contact coefficients, the right-hand side and the reference
     velocities of one step.
 
-    The system matrix is ``A = matrix + contact blocks``: apply it with :meth:`apply`, get its diagonal
+    The system matrix is ``A = matrix + stitch blocks + contact blocks``: apply it with :meth:`apply`, get its diagonal
     blocks with :meth:`diagonal` and the whole of it on the host with :meth:`dense`. Buffers::
 
         matrix                BSR, (n x n blocks of 3x3), nnz = n + distinct face/hinge pairs
@@ -520,6 +568,18 @@ class ImplicitSystem:
         self._matrix_view.values = self.matrix.values
         self._matrix_view.missing = self._missing
         self.rhs = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self._stitches: ContactArrays | None = None
+        """The model's stitches in the contact kernels' layout (alpha = beta: the normal is unused)."""
+        self.stitch_coefficients = wp.zeros(model.stitch_count, dtype=wp.vec2, device=self.device)
+        if model.stitch_count:
+            view = ContactArrays()
+            view.vertices = model.stitch_vertices
+            view.weights = model.stitch_weights
+            view.normals = wp.zeros(model.stitch_count, dtype=wp.vec3, device=self.device)
+            view.multiplicity = wp.ones(model.stitch_count, dtype=wp.int32, device=self.device)
+            view.count = wp.array([model.stitch_count], dtype=wp.int32, device=self.device)
+            view.rest_gap = 0.0
+            self._stitches = view
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
 
     def reserve_contacts(self, capacity: int) -> None:
@@ -560,6 +620,11 @@ class ImplicitSystem:
             wp.launch(_assemble_hinges, dim=model.hinge_count, device=self.device,
                       inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params],
                       outputs=[self._matrix_view, self.rhs])
+        if self._stitches is not None:
+            lanes = row_lanes(self.device, self.model.stitch_count)
+            wp.launch(_assemble_stitches, dim=lanes, device=self.device,
+                      inputs=[self._stitches, model.vertices, positions, self.reference_velocities, params, lanes],
+                      outputs=[self.stitch_coefficients, self.rhs])
         self._contacts = None
         self._product_launches = {}
         if contacts is not None and contacts.capacity > 0:
@@ -591,6 +656,12 @@ class ImplicitSystem:
             commands = [wp.launch(_element_matrix_times, dim=self.model.vertex_count, device=self.device,
                                   inputs=[matrix.offsets, matrix.columns, matrix.values, x], outputs=[y],
                                   record_cmd=True)]
+            if self._stitches is not None:
+                lanes = row_lanes(self.device, self.model.stitch_count)
+                commands.append(wp.launch(_add_contact_products, dim=lanes, device=self.device,
+                                          inputs=[self._stitches, self.model.vertices.kind,
+                                                  self.stitch_coefficients, x, lanes],
+                                          outputs=[y], record_cmd=True))
             if self._contacts is not None:
                 lanes = row_lanes(self.device, self._contacts.vertices.shape[0])
                 commands.append(wp.launch(_add_contact_products, dim=lanes, device=self.device,
@@ -604,6 +675,11 @@ class ImplicitSystem:
     def diagonal(self, out: wp.array) -> None:
         """Write the (n,) mat33 diagonal blocks of A into ``out``. Allocates: no. Capture-safe: yes."""
         bsr_get_diag(self.matrix, out=out)
+        if self._stitches is not None:
+            lanes = row_lanes(self.device, self.model.stitch_count)
+            wp.launch(_add_contact_diagonal, dim=lanes, device=self.device,
+                      inputs=[self._stitches, self.model.vertices.kind, self.stitch_coefficients,
+                              self.model.vertex_count, lanes], outputs=[out])
         if self._contacts is not None:
             lanes = row_lanes(self.device, self._contacts.vertices.shape[0])
             wp.launch(_add_contact_diagonal, dim=lanes, device=self.device,
@@ -637,13 +713,22 @@ class ImplicitSystem:
         dense = np.zeros((n, 3, n, 3))
         np.add.at(dense, (rows, slice(None), matrix.columns.numpy()[:nnz]),
                   matrix.values.numpy()[:nnz].astype(np.float64))
+        free = self.model.vertices.kind.numpy() == VERTEX_FREE
+        if self._stitches is not None:
+            ids = self.model.stitch_vertices.numpy()
+            weights = self.model.stitch_weights.numpy().astype(np.float64)
+            alpha = self.stitch_coefficients.numpy()[:, 0].astype(np.float64)
+            for c in range(self.model.stitch_count):
+                for a in range(4):
+                    for b in range(4):
+                        if free[ids[c, a]] and free[ids[c, b]]:
+                            dense[ids[c, a], :, ids[c, b], :] += weights[c, a] * weights[c, b] * alpha[c] * np.eye(3)
         if self._contacts is not None:
             contacts = self._contacts
             used = min(int(contacts.count.numpy()[0]), contacts.vertices.shape[0])
             ids = contacts.vertices.numpy()[:used]
             weights = contacts.weights.numpy()[:used].astype(np.float64)
             blocks = self.contact_blocks()[:used].astype(np.float64)
-            free = self.model.vertices.kind.numpy() == VERTEX_FREE
             for c in range(used):
                 if np.any(ids[c] < 0) or np.any(ids[c] >= n):
                     continue

@@ -173,6 +173,15 @@ class SolverConfig:
     contact_stiffness_scale: float = 1.0
     """Multiplier of the automatic contact stiffness (dimensionless); ignored when
     ``contact_stiffness`` is set."""
+    stitch_stiffness_scale: float = 10.0
+    """Stiffness of the stitch springs (seams), a multiple of ``m_eff / dt^2`` like the automatic contact
+    stiffness (dimensionless). A seam carries the weight of what hangs from it (a skirt from its waistband),
+    so it is ten times stiffer than a contact: a stitch then gives about (supported mass / its own
+    effective mass) x g dt^2 / 10."""
+    sewing_speed: float = 0.5
+    """Fastest a stitch pulls its seam closed [m/s]: the offset a stitch's force sees is clamped to
+    ``sewing_speed x dt``, so seams that start open (pieces laid out around a body) close over a few
+    frames instead of snapping shut in one step."""
     friction_velocity_epsilon: float = 1.0e-3
     """eps_v [m/s]: below this tangential speed, Coulomb friction (coefficient
     ``mu |f_n| / max(|v_t|, eps_v)``) turns into a stiff viscous damper that approximates sticking.
@@ -205,6 +214,8 @@ class SolverConfig:
             _positive(owner, "contact_stiffness", self.contact_stiffness)
         _positive(owner, "contact_stiffness_scale", self.contact_stiffness_scale)
         _positive(owner, "friction_velocity_epsilon", self.friction_velocity_epsilon)
+        _positive(owner, "stitch_stiffness_scale", self.stitch_stiffness_scale)
+        _positive(owner, "sewing_speed", self.sewing_speed)
         return self
 
 

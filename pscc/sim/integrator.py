@@ -387,6 +387,8 @@ class ImplicitEuler:
         params.air_drag = config.air_drag
         params.contact_stiffness = config.contact_stiffness if config.contact_stiffness is not None else 0.0
         params.contact_stiffness_scale = config.contact_stiffness_scale
+        params.stitch_stiffness_scale = config.stitch_stiffness_scale
+        params.sewing_step = config.sewing_speed * dt
         params.friction_epsilon = config.friction_velocity_epsilon
         params.hinge_degeneracy_ratio = SIM_HINGE_DEGENERACY_RATIO
         return params

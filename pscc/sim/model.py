@@ -147,6 +147,8 @@ class ClothModel:
             (see :meth:`pscc.sim.ImplicitEuler.step`); they start at their initial positions.
         flat_bending: Optional (m,) bool: faces whose hinges bend towards flat (rest angle 0) although
             ``rest`` is 3-D (a garment whose curved shape sets its rest lengths but not its folds).
+        stitches: Optional (s, 4) rows ``(i, j, k, r)``: vertex i sewn to (1 - r) x_j + r x_k
+            (:func:`pscc.mesh.mesh_data.check_stitches`); zero-length springs of the implicit system.
         device: Warp device.
 
     Raises:
@@ -156,9 +158,9 @@ class ClothModel:
 
     def __init__(self, vertices: Any, faces: Any, *, rest: Any = None,
                  materials: ClothMaterial | Sequence[ClothMaterial] | None = None, object_ids: Any = None,
-                 pinned: Any = None, handles: Any = None, flat_bending: Any = None,
+                 pinned: Any = None, handles: Any = None, flat_bending: Any = None, stitches: Any = None,
                  device: wp.DeviceLike = None) -> None:
-        mesh = validate_mesh(vertices, faces, rest=rest, object_ids=object_ids)
+        mesh = validate_mesh(vertices, faces, rest=rest, object_ids=object_ids, stitches=stitches)
         self.device = wp.get_device(device)
         self.mesh = mesh
         """The validated mesh (host arrays)."""
@@ -233,6 +235,18 @@ class ClothModel:
         self.face_count: int = m
         """Number of triangles m."""
         self.hinge_count: int = int(hinges.shape[0])
+        rows = mesh.stitches if mesh.stitches is not None else np.zeros((0, 4))
+        self.stitches: np.ndarray = rows
+        """(s, 4) float64 stitch rows ``(i, j, k, r)`` (host copy)."""
+        self.stitch_count: int = int(rows.shape[0])
+        ids = rows[:, :3].astype(np.int32)
+        self.stitch_vertices = wp.array(np.concatenate([ids, ids[:, 1:2]], axis=1).reshape(-1, 4), dtype=wp.vec4i,
+                                        device=self.device)
+        """(s,) vec4i (i, j, k, j) of each stitch (the last weight is 0)."""
+        r = rows[:, 3]
+        weights = np.stack([np.ones_like(r), r - 1.0, -r, np.zeros_like(r)], axis=1).astype(np.float32)
+        self.stitch_weights = wp.array(weights.reshape(-1, 4), dtype=wp.vec4, device=self.device)
+        """(s,) vec4 (1, -(1 - r), -r, 0): sum_a w_a x_a is the offset of vertex i from its seam point."""
         """Number of interior edges with exactly two faces (bending elements)."""
         self.mass_host: np.ndarray = mass.astype(np.float32)
         """(n,) float32 lumped masses [kg] (host copy)."""

@@ -31,6 +31,9 @@ class Scene:
         steps_per_frame: time steps per frame (dt = frame_time / steps_per_frame).
         flat_bending: optional (m,) bool: faces whose bending rest angles are 0 although the rest
             shape is 3-D (hinges with such a face bend towards flat).
+        stitches: optional (s, 4) float64 rows ``(i, j, k, r)`` of cloth vertex ids: vertex i is sewn to
+            the point (1 - r) x_j + r x_k (a seam). Stiff zero-length springs in the implicit solve; the
+            stitched features never count as a contact or an intersection (``docs/simulator.md``).
     """
 
     name: str
@@ -46,6 +49,7 @@ class Scene:
     frame_time: float = 1.0 / 30.0
     steps_per_frame: int = 8
     flat_bending: np.ndarray | None = None
+    stitches: np.ndarray | None = None
 
     @property
     def time_step(self) -> float:

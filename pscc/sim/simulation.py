@@ -269,9 +269,9 @@ def _series_patterns(formats: tuple[str, ...]) -> list[str]:
 def scene_identity(scene: Scene, contact: ContactConfig) -> dict[str, Any]:
     """The default identity of a run of ``scene``: its name, size and a SHA-256 of everything it is made of.
 
-    The hash covers the cloth arrays (positions, faces, rest shape, object ids, flat-bending faces), the materials, the
-    solver and contact settings, the handles' vertices and positions and the obstacles' faces and
-    positions at t = 0 and t = 1 s.
+    The hash covers the cloth arrays (positions, faces, rest shape, object ids, flat-bending faces,
+    stitches), the materials, the solver and contact settings, the handles' vertices and positions and the
+    obstacles' faces and positions at t = 0 and t = 1 s.
     """
     digest = hashlib.sha256()
 
@@ -289,6 +289,8 @@ def scene_identity(scene: Scene, contact: ContactConfig) -> dict[str, Any]:
         scene.steps_per_frame)
     if scene.flat_bending is not None:
         add(np.asarray(scene.flat_bending, bool))
+    if scene.stitches is not None:
+        add(np.asarray(scene.stitches, np.float64))
     for handle in scene.handles:
         add(np.asarray(handle.vertices), *(np.asarray(handle.transform(t)[k]) for t in (0.0, 1.0) for k in (0, 1)))
     for obstacle in scene.obstacles:

@@ -159,7 +159,8 @@ class ClothSolver:
             self.model = ClothModel(vertices, scene.faces, rest=rest_all,
                                     materials=materials if per_object else materials[0],
                                     object_ids=scene.object_ids if per_object else None,
-                                    handles=all_handles, flat_bending=flat_bending, device=self.device)
+                                    handles=all_handles, flat_bending=flat_bending, stitches=scene.stitches,
+                                    device=self.device)
         except InputError as error:
             if error.source != "argument":
                 raise
@@ -191,7 +192,7 @@ class ClothSolver:
         rigid = [int(v) for v in obstacle_objects]
         self.detector = CollisionDetector(self.collision_faces, method=self.contact.method,
                                           object_ids=collision_objects, rest=rest_all, rigid_objects=rigid,
-                                          device=str(self.device))
+                                          device=str(self.device), stitches=scene.stitches)
         # The BSR values are dead from the end of one integration to the start of the next, the stretch
         # in which the detector hashes; the candidate pairs and times of impact are dead from the step's
         # DCD (the springs are built from it) to the next broad phase, which rewrites them from the hash's
@@ -242,7 +243,8 @@ class ClothSolver:
                                                     spatial_hash=getattr(self.detector, "spatial_hash", None),
                                                     device_topology=shared,
                                                     face_boxes=(self.detector.boxes.face_lower,
-                                                                self.detector.boxes.face_upper))
+                                                                self.detector.boxes.face_upper),
+                                                    seams=self.detector.seams)
         initial = self._cloth_crossings(vertices)
         self.initial_crossings = int(initial.shape[0])
         """Edge-face crossings of the initial state (non-zero only with ``allow_initial_intersections``)."""
@@ -293,6 +295,8 @@ class ClothSolver:
         seen.update(id(getattr(springs, name)) for name in springs.merge_table_lent)
         # ... and the intersection check's face boxes, the detector's.
         seen.update({id(self.detector.boxes.face_lower), id(self.detector.boxes.face_upper)})
+        # ... and the stitch partners (the detector's, shared with the check).
+        seen.update({id(self.detector.seams.args.offsets), id(self.detector.seams.args.partners)})
         parts = {
             "collision": int(collision["total"]),
             "contact_springs": warp_array_bytes(self.proximity, seen=seen),

@@ -34,8 +34,11 @@ def test_the_solver_uploads_the_collision_mesh_once_and_counts_it_once_and_share
     topology_bytes = sum(a.capacity for a in shared.arrays)
     check = solver.intersection_check
     box_bytes = check.face_lower.capacity + check.face_upper.capacity
+    # ... and the stitch partners (none here), the detector's too.
+    assert check.seams is solver.detector.seams
+    seam_bytes = solver.detector.seams.device_bytes
     with_topology = warp_array_bytes(check, seen={id(check.spatial_hash)})
-    assert solver.device_bytes()["intersection_check"] == with_topology - topology_bytes - box_bytes
+    assert solver.device_bytes()["intersection_check"] == with_topology - topology_bytes - box_bytes - seam_bytes
     assert solver.detector.spatial_hash.device_bytes["faces"] == 0
 
 
