@@ -25,6 +25,7 @@ from pscc.mesh.generate import grid_sheet, icosphere
 from pscc.mesh.io import SUPPORTED_EXTENSIONS, load_mesh
 from pscc.mesh.mesh_data import MeshData
 from pscc.scenes.scene_motions import PivotedMotion, SequenceObstacle
+from pscc.scenes.seam_builder import boundary_path, sew
 from pscc.scenes.toml_text import config_to_toml, field_kind
 from pscc.sim.config import SIM_MIN_REST_AREA_RATIO, ClothMaterial, SolverConfig
 from pscc.sim.contact_config import ContactConfig
@@ -79,7 +80,8 @@ _TOP_KEYS = ("scene", "solver", "contact", "cloth", "obstacle")
 _SCENE_KEYS = ("name", "description", "frame_rate", "frame_time", "steps_per_frame", "frames")
 _PLACEMENT_KEYS = ("translate", "rotate", "scale")
 _CLOTH_KEYS = ("name", "mesh", "rest", "uv_scale", "rest_bending", "sheet", *_PLACEMENT_KEYS, "material", "pins",
-               "handles")
+               "handles", "stitches")
+_STITCH_KEYS = ("vertices", "to", "to_piece", "reverse")
 _SHEET_KEYS = ("size", "cells")
 _HANDLE_KEYS = ("name", "vertices", "times", "translations", "rotations", "pivot")
 _OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", "sequence_frame_rate", "sequence_prim",
@@ -123,6 +125,7 @@ class _Piece:
     material: ClothMaterial
     flat_bending: bool = False  # rest angles 0 although the rest shape is 3-D
     stitches: np.ndarray | None = None  # (s, 4) rows (i, j, k, r), local ids
+    seam_tables: list[dict[str, Any]] = field(default_factory=list)  # [[cloth.stitches]], resolved later
     handles: list[tuple[str, np.ndarray, Any]] = field(default_factory=list)  # (name, local ids, motion or None)
 
 
@@ -331,6 +334,18 @@ class SceneBuilder:
             del spec["obstacle"]
 
         vertices, faces, rest, object_ids, handles, flat_bending, stitches = [], [], [], [], [], [], []
+        offsets = np.cumsum([0] + [piece.vertices.shape[0] for piece in pieces])
+        for index, piece in enumerate(pieces):
+            spec["cloth"][index]["stitches"] = []
+            for s_index, table in enumerate(piece.seam_tables):
+                rows, resolved = self.seam(table, index, pieces, f"cloth[{index}].stitches[{s_index}]")
+                target = [p.name for p in pieces].index(resolved["to_piece"])
+                rows[:, 0] += offsets[index]
+                rows[:, 1:3] += offsets[target]
+                stitches.append(rows)
+                spec["cloth"][index]["stitches"].append(resolved)
+            if not spec["cloth"][index]["stitches"]:
+                del spec["cloth"][index]["stitches"]
         offset = 0
         rest_dimension = max(piece.rest.shape[1] for piece in pieces)  # 3 when a piece keeps its 3-D shape
         for index, piece in enumerate(pieces):
@@ -512,6 +527,12 @@ class SceneBuilder:
                        flat_bending=spec.get("rest_bending") == "flat",
                        stitches=None if "sheet" in raw else mesh.stitches)
         self.cloth_handles(raw, piece, key, spec)
+        seams_raw = raw.get("stitches", [])
+        if isinstance(seams_raw, dict) or not isinstance(seams_raw, list) or not all(isinstance(t, dict)
+                                                                                    for t in seams_raw):
+            raise self.error(f"{key}.stitches", f"expected [[cloth.stitches]] tables, got {_show(seams_raw)}",
+                             "write each seam as a [[cloth.stitches]] table with vertices and to")
+        piece.seam_tables = seams_raw
         return piece, spec
 
     def mesh_rest(self, mesh: Any, mode: str, scale: float, uv_scale: float, piece_key: str,
@@ -621,6 +642,47 @@ class SceneBuilder:
         raise self.error(key, f"the rest coordinates in the file give {where} zero area",
                          "give every face three non-collinear (u, v) rest coordinates in the NPZ 'rest' key, or "
                          "remove that face")
+
+    def seam(self, table: Mapping[str, Any], index: int, pieces: list[_Piece], key: str) -> tuple[np.ndarray,
+                                                                                                   dict[str, Any]]:
+        """Stitch rows (local ids) of one [[cloth.stitches]] table of piece ``index`` and its resolved spec."""
+        self.check_keys(table, _STITCH_KEYS, key)
+        for required in ("vertices", "to"):
+            if required not in table:
+                raise self.error(f"{key}.{required}", "is missing", "give vertices = { side = \"right\" } (this "
+                                 "piece's boundary) and to = { side = \"left\" } (the boundary it is sewn to)")
+        piece = pieces[index]
+        names = [p.name for p in pieces]
+        target_name = self.string(table.get("to_piece", piece.name), f"{key}.to_piece")
+        if target_name not in names:
+            raise self.error(f"{key}.to_piece", f"no cloth piece is named {target_name!r}",
+                             f"use one of {names}")
+        target = pieces[names.index(target_name)]
+        reverse = None
+        if "reverse" in table:
+            if not isinstance(table["reverse"], bool):
+                raise self.error(f"{key}.reverse", f"expected true or false, got {_show(table['reverse'])}",
+                                 "write reverse = true to run the second boundary the other way")
+            reverse = table["reverse"]
+        paths = []
+        for name, owner in (("vertices", piece), ("to", target)):
+            ids = self.select(table[name], owner, f"{key}.{name}")
+            try:
+                paths.append(boundary_path(owner.faces, ids))
+            except ValueError as error:
+                raise self.error(f"{key}.{name}", str(error), "select the vertices of one boundary of the piece "
+                                 "(e.g. { side = \"left\" }), a path or a closed loop") from None
+        (source, source_closed), (goal, goal_closed) = paths
+        if target is piece and np.intersect1d(source, goal).size:
+            raise self.error(f"{key}.to", "shares vertices with vertices", "sew two different boundaries")
+        try:
+            rows, reversed_ = sew(source, source_closed, piece.rest, goal, goal_closed, target.rest, piece.vertices,
+                                  target.vertices, reverse)
+        except ValueError as error:
+            raise self.error(key, str(error), "select both boundaries as loops or both as paths") from None
+        resolved = {"vertices": [int(v) for v in source], "to": [int(v) for v in goal], "to_piece": target_name,
+                    "reverse": reversed_}
+        return rows, resolved
 
     def cloth_handles(self, raw: Mapping[str, Any], piece: _Piece, key: str, spec: dict[str, Any]) -> None:
         """Pins and [[cloth.handles]] of a piece, into ``piece.handles`` and ``spec``."""
