@@ -1,0 +1,54 @@
+"""The shipped example garment (examples/garment): a two-panel skirt cut from its UV layout and sewn by OBJ
+stitch lines closes its side seams around a body, with no halved step and no crossing but the seams."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from pscc.collision.intersection import IntersectionCheck
+from pscc.scenes.scene_file import load_scene_file
+from pscc.sim.simulation import Simulation
+
+FOLDER = Path(__file__).resolve().parents[2] / "examples" / "garment"
+THICKNESS = 0.002
+
+
+def test_the_generator_writes_the_shipped_files(tmp_path: Path) -> None:
+    spec = importlib.util.spec_from_file_location("make_skirt", FOLDER / "make_skirt.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(tmp_path)
+    for name in ("skirt.obj", "body.obj"):
+        assert (tmp_path / name).read_text() == (FOLDER / name).read_text(), name
+
+
+def test_the_skirt_sews_its_seams_around_the_body() -> None:
+    scene, contact, options = load_scene_file(FOLDER / "skirt.toml")
+    assert scene.stitches.shape == (26, 4) and scene.rest.shape[1] == 2  # rest from the uv layout
+    sim = Simulation(scene, device="cpu", contact=contact)
+    stitches = scene.stitches
+    i, j, k = (stitches[:, c].astype(int) for c in range(3))
+    r = stitches[:, 3:4]
+    cloth = len(scene.vertices)
+    plain = IntersectionCheck(sim.solver.collision_faces, cloth + len(scene.obstacles[0].vertices), "cpu")
+    partners = {(int(a), int(b)) for a, b in zip(np.r_[i, i, j, k], np.r_[j, k, i, i], strict=True)}
+    for frame in range(8):
+        record = sim.step_frame()
+        assert record["counts"]["halvings"] == 0
+        x = sim.state.positions.numpy()
+        gap = np.linalg.norm(x[i] - ((1.0 - r) * x[j] + r * x[k]), axis=1).max()
+        if frame >= 2:
+            assert gap < 2 * THICKNESS, (frame, gap)  # the issue's bound: seams closed to 2 thicknesses
+        assert sim.solver.intersection_check.find(x).shape == (0, 2)
+        # Independent of the seam exemption: every crossing the plain check reports touches a stitch.
+        edges = sim.solver.detector.topology.edges
+        faces = sim.solver.collision_faces
+        for edge, face in plain.find(x)[:, :2]:
+            ends = edges[edge]
+            assert any((int(e), int(v)) in partners for e in ends for v in faces[face]), (frame, edge, face)
+    radius = np.linalg.norm(x[:cloth, :2], axis=1)
+    assert radius.min() > 0.16  # outside the body (radius 0.16 m)
+    assert options["frames"] == 45
