@@ -111,6 +111,9 @@ class ContactArrays:
     multiplicity: wp.array(dtype=wp.int32)
     count: wp.array(dtype=wp.int32)
     rest_gap: float
+    start_gap: wp.array(dtype=float)  # per vertex: how close it started to something else; empty: none
+    clock: wp.array(dtype=float)  # [1]: seconds since the start
+    gap_rate: float  # [m/s]: how fast a start gap opens up to the rest gap
 
 
 @wp.func
@@ -332,7 +335,14 @@ def _assemble_contact(
         if vertices.kind[ids[a]] == _FREE and mass > 0.0:
             inverse_mass = inverse_mass + w[a] * w[a] / mass
         friction = friction + 0.5 * wp.abs(w[a]) * vertices.friction[ids[a]]
-    gap = wp.dot(n, point) - contacts.rest_gap
+    rest = contacts.rest_gap
+    if contacts.start_gap.shape[0] > 0:
+        # Surfaces that started closer than the thickness keep that distance at first and are eased apart
+        # (ImplicitSystem.set_start_gaps): the spring's rest gap opens at gap_rate up to the thickness.
+        start = wp.min(wp.min(contacts.start_gap[ids[0]], contacts.start_gap[ids[1]]),
+                       wp.min(contacts.start_gap[ids[2]], contacts.start_gap[ids[3]]))
+        rest = wp.min(rest, start + contacts.gap_rate * contacts.clock[0])
+    gap = wp.dot(n, point) - rest
     dt = params.dt
     stiffness = params.contact_stiffness
     if stiffness <= 0.0 and inverse_mass > 0.0:
@@ -422,6 +432,12 @@ def _assemble_stitches(
             _emit_force(ids[a], (-stiffness * w[a]) * offset, dt, vertices.kind, rhs)
             if vertices.kind[ids[a]] == _FREE:
                 wp.atomic_sub(rhs, ids[a], w[a] * known)
+
+
+@wp.kernel
+def _tick(dt: float, clock: wp.array(dtype=float)):
+    """One thread: clock += dt."""
+    clock[0] = clock[0] + dt
 
 
 @wp.kernel
@@ -568,6 +584,12 @@ class ImplicitSystem:
         self._matrix_view.values = self.matrix.values
         self._matrix_view.missing = self._missing
         self.rhs = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self.contact_start_gap = wp.zeros(0, dtype=float, device=self.device)
+        """(n,) float32 per vertex: the distance it started at from something it touched, or empty (none)."""
+        self.contact_clock = wp.zeros(1, dtype=float, device=self.device)
+        """[1] float32 seconds since the start (advanced by :meth:`tick`, set by :meth:`set_clock`)."""
+        self.contact_gap_rate = 0.0
+        """[m/s] how fast a start gap opens (:meth:`set_start_gaps`)."""
         self._stitches: ContactArrays | None = None
         """The model's stitches in the contact kernels' layout (alpha = beta: the normal is unused)."""
         self.stitch_coefficients = wp.zeros(model.stitch_count, dtype=wp.vec2, device=self.device)
@@ -579,8 +601,38 @@ class ImplicitSystem:
             view.multiplicity = wp.ones(model.stitch_count, dtype=wp.int32, device=self.device)
             view.count = wp.array([model.stitch_count], dtype=wp.int32, device=self.device)
             view.rest_gap = 0.0
+            view.start_gap = wp.zeros(0, dtype=float, device=self.device)
+            view.clock = self.contact_clock
+            view.gap_rate = 0.0
             self._stitches = view
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
+
+    def set_start_gaps(self, gaps: np.ndarray | None, rate: float) -> None:
+        """Ease apart surfaces that start closer than the thickness: a contact spring's rest gap is
+        ``min(h, min_a gaps[a] + rate t)`` (t: :attr:`contact_clock`) instead of h, so it keeps their start
+        distance and opens it at ``rate`` instead of pushing the whole deficit out in one step.
+
+        Args:
+            gaps: (n,) per-vertex start distance [m] (the thickness or more where nothing was near), or
+                None to switch the easing off.
+            rate: [m/s] how fast the gaps open.
+
+        Allocates: yes. Capture-safe: no.
+        """
+        if gaps is None:
+            self.contact_start_gap = wp.zeros(0, dtype=float, device=self.device)
+        else:
+            self.contact_start_gap = wp.array(np.asarray(gaps, np.float32), dtype=float, device=self.device)
+        self.contact_gap_rate = float(rate)
+
+    def set_clock(self, t: float) -> None:
+        """Set :attr:`contact_clock` to ``t`` [s] (a host upload: the host path, a resume).
+        Allocates: no. Capture-safe: no."""
+        self.contact_clock.fill_(float(t))
+
+    def tick(self, dt: float) -> None:
+        """Advance :attr:`contact_clock` by ``dt`` on the device (every step). Allocates: no. Capture-safe: yes."""
+        wp.launch(_tick, dim=1, inputs=[float(dt)], outputs=[self.contact_clock], device=self.device)
 
     def reserve_contacts(self, capacity: int) -> None:
         """Size the contact coefficients for ``capacity`` contacts (the springs' capacity, which grows and
@@ -636,6 +688,9 @@ class ImplicitSystem:
             view.multiplicity = contacts.multiplicity
             view.count = contacts.count
             view.rest_gap = contacts.rest_gap
+            view.start_gap = self.contact_start_gap
+            view.clock = self.contact_clock
+            view.gap_rate = self.contact_gap_rate
             self.contact_coefficients.zero_()
             lanes = row_lanes(self.device, contacts.capacity)
             wp.launch(_assemble_contacts, dim=lanes, device=self.device,

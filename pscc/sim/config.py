@@ -173,6 +173,11 @@ class SolverConfig:
     contact_stiffness_scale: float = 1.0
     """Multiplier of the automatic contact stiffness (dimensionless); ignored when
     ``contact_stiffness`` is set."""
+    start_gap_relax_time: float = 0.3
+    """Surfaces that start closer than the thickness (a garment draped onto a body, layers pressed together)
+    are eased apart over this time [s]: their contact springs keep the start distance at first and open it
+    to the thickness at ``thickness / start_gap_relax_time``, instead of pushing the whole deficit out in
+    a step or two (which made the outer of two pressed layers fly off by about 2 thicknesses)."""
     stitch_stiffness_scale: float = 10.0
     """Stiffness of the stitch springs (seams), a multiple of ``m_eff / dt^2`` like the automatic contact
     stiffness (dimensionless). A seam carries the weight of what hangs from it (a skirt from its waistband),
@@ -214,6 +219,7 @@ class SolverConfig:
             _positive(owner, "contact_stiffness", self.contact_stiffness)
         _positive(owner, "contact_stiffness_scale", self.contact_stiffness_scale)
         _positive(owner, "friction_velocity_epsilon", self.friction_velocity_epsilon)
+        _positive(owner, "start_gap_relax_time", self.start_gap_relax_time)
         _positive(owner, "stitch_stiffness_scale", self.stitch_stiffness_scale)
         _positive(owner, "sewing_speed", self.sewing_speed)
         return self

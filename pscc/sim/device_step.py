@@ -356,11 +356,12 @@ class DeviceStep:
         return self.report.numpy().astype(np.int64)
 
     def _saved_arrays(self, state: Any) -> list[wp.array]:
-        return [state.positions, state.velocities, self.solver.integrator.dv]
+        return [state.positions, state.velocities, self.solver.integrator.dv,
+                self.solver.integrator.system.contact_clock]
 
     def save(self, state: Any) -> None:
         """Device copies of what the frame changes that a re-run needs and cannot recompute: positions,
-        velocities and the CG warm start (the contact springs are a function of the positions:
+        velocities, the CG warm start and the contact clock (the contact springs are a function of the positions:
         :meth:`pscc.sim.ClothSolver.advance_frame` rebuilds them after :meth:`restore`). Allocates: when
         a buffer's shape changed. Capture-safe: yes once allocated."""
         arrays = self._saved_arrays(state)

@@ -325,6 +325,7 @@ class ImplicitEuler:
                   inputs=[self.model.vertices.kind, self.targets, self.system.reference_velocities,
                           state_in.positions, state_in.velocities, self.dv, step],
                   outputs=[state_out.positions, state_out.velocities])
+        self.system.tick(step)
 
     def set_handle_targets(self, handle_targets: Any) -> None:
         """Set the positions [m] the handles reach at the end of the next step (and keep them after).

@@ -39,6 +39,7 @@ from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
+from pscc.geometry.distance import edge_edge_distance, vertex_face_distance
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.device_step import (
     CANDIDATE_PEAKS,
@@ -256,6 +257,36 @@ class ClothSolver:
                              "separate the surfaces in the input; to start anyway set allow_initial_intersections "
                              "= true under [contact] in the scene file (ContactConfig(allow_initial_intersections"
                              "=True) in Python), which lets crossing surfaces start but cannot pull them apart")
+        self.start_contacts = self._ease_start_contacts(vertices)
+        """Cloth vertices that start closer than the thickness to another surface (eased apart)."""
+
+    def _ease_start_contacts(self, vertices: np.ndarray) -> int:
+        """Find the pairs closer than the thickness h in the initial state and let the contact springs keep
+        their start distance at first, opening it to h over ``SolverConfig.start_gap_relax_time``
+        (:meth:`pscc.sim.assembly.ImplicitSystem.set_start_gaps`): a garment draped onto a body, or layers
+        pressed together, are eased apart instead of popping off. Returns the number of cloth vertices
+        that start that close."""
+        h = self.thickness
+        found = self.detector.detect(vertices, thickness=h)
+        points = vertices.astype(np.float64)
+        gaps = np.full(points.shape[0], h, dtype=np.float64)
+        free = ~self._kinematic
+        rows = [np.concatenate([found.vertex_face[:, :1], self.collision_faces[found.vertex_face[:, 1]]], axis=1),
+                found.edge_edge]
+        for ids, distance in ((rows[0], vertex_face_distance), (rows[1], edge_edge_distance)):
+            if ids.shape[0] == 0:
+                continue
+            d = distance(points[ids], device=self.device)
+            close = d < h
+            for column in range(4):
+                vertex = ids[close, column]
+                keep = free[vertex]
+                np.minimum.at(gaps, vertex[keep], d[close][keep])
+        eased = int((gaps < h).sum())
+        relax = float(self.scene.solver.start_gap_relax_time)
+        self.integrator.system.set_start_gaps(gaps if eased else None, h / relax)
+        self.integrator.system.set_clock(0.0)
+        return eased
 
     # ------------------------------------------------------------------ public
 
@@ -372,6 +403,7 @@ class ClothSolver:
         self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()
                                        if key.startswith("detector_")})
         self.time = float(np.asarray(data["time"]).reshape(-1)[0])
+        self.integrator.system.set_clock(self.time)
         self._frame_graph = None  # buffers may have been replaced: record again after an eager frame
         self._frame_graph_warm = None
 
@@ -693,6 +725,7 @@ class ClothSolver:
         mark = time.perf_counter()
         springs = self.proximity.springs
         targets = self._kinematic_targets(t + dt) if self.model.handle_count else None
+        self.integrator.system.set_clock(t)  # a retried (halved) step starts from its own time
         integration = self.integrator.step(state_in, state_out, dt,
                                            contacts=springs if springs.host_count else None,
                                            handle_targets=targets)

@@ -62,8 +62,9 @@ def test_the_system_holds_only_the_matrix_two_vectors_and_two_scalars_per_contac
     system = integrator.system
     matrix = system.matrix
     n = model.vertex_count
-    # The BSR arrays (and Warp's nnz transfer buffer), rhs, v_ref, (alpha, beta) per slot, the missing count.
-    expected = warp_array_bytes(matrix) + 2 * 12 * n + 8 * springs.capacity + 4
+    # The BSR arrays (and Warp's nnz transfer buffer), rhs, v_ref, (alpha, beta) per slot, the missing count,
+    # the contact clock (no start gaps: nothing started in contact).
+    expected = warp_array_bytes(matrix) + 2 * 12 * n + 8 * springs.capacity + 4 + 4
     assert warp_array_bytes(matrix) <= matrix.offsets.capacity + matrix.columns.capacity + matrix.values.capacity + 64
     # Not the system's own: the model, the springs and the solver vectors its packed launches hold.
     seen = {id(model), id(springs.vertices), id(springs.weights), id(springs.normals), id(springs.count),

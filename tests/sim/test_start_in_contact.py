@@ -1,6 +1,6 @@
 """A garment that starts in contact (closer than the thickness to a body and to another layer) is normal
-input: accepted, separated to about the thickness without halved steps or intersections, never refused
-(issue 13). Not yet gentle: the outer layer first overshoots by about 2 thicknesses (see the test)."""
+input: accepted, eased apart to about the thickness over ``start_gap_relax_time`` without a jump, halved
+steps or intersections, never refused (issue 13)."""
 
 from __future__ import annotations
 
@@ -39,20 +39,21 @@ def test_layers_starting_inside_the_thickness_separate_gently(tmp_path: Path) ->
     (tmp_path / "scene.toml").write_text(SCENE)
     scene, contact, _ = load_scene_file(tmp_path / "scene.toml")
     sim = Simulation(scene, device="cpu", contact=contact)
+    assert sim.solver.start_contacts == 121 + 81  # every cloth vertex started that close
     inner = np.arange(121)
     outer = np.arange(121, 202)
-    start = scene.vertices.astype(np.float64)
+    previous = scene.vertices.astype(np.float64)
     faces = sim.solver.collision_faces
-    for frame in range(4):
+    for _ in range(14):  # the relax time (0.3 s) and a few frames more
         record = sim.step_frame()
         assert record["counts"]["halvings"] == 0
         x = sim.state.positions.numpy().astype(np.float64)
         cloth = x[:len(scene.vertices)]
-        if frame == 0:
-            # The push-out is not gentle yet: the stiff contact springs restore the whole missing gap in a
-            # few steps, and the outer layer overshoots to about 3 thicknesses before it settles. Bounded here
-            # so that it cannot get worse unnoticed.
-            assert np.abs(cloth - start).max() < 4 * THICKNESS
+        # Gently: no vertex moves more than half the thickness in a frame (each gap opens by h / 0.3 s, and the
+        # outer layer rides on the inner one: 2 x 0.22 mm a frame). Before the easing, the outer layer jumped
+        # by 3 thicknesses in the first frame.
+        assert np.abs(cloth - previous).max() < 0.5 * THICKNESS
+        previous = cloth
         mesh = ipctk.CollisionMesh(np.zeros_like(x), ipctk.edges(faces), faces)
         assert not ipctk.has_intersections(mesh, x)
     # Separated to about the thickness: from the box, and between the layers (at the outer layer's middle).
