@@ -343,7 +343,8 @@ class ClothSolver:
         """Everything a later step depends on, as host arrays (for checkpoints).
 
         That is the state (positions, velocities), the simulated time, the integrator's warm start,
-        the contact springs of the last DCD and the detector's normal cone test front. Restoring it
+        the contact springs of the last DCD, the contact clock (:meth:`_ease_start_contacts`) and the
+        detector's normal cone test front. Restoring it
         with :meth:`load_state_dict` into a solver of the same scene continues bit for bit as the
         original would on the CPU.
         """
@@ -359,6 +360,8 @@ class ClothSolver:
             "spring_weights": springs.weights.numpy()[:count].copy(),
             "spring_normals": springs.normals.numpy()[:count].copy(),
             "spring_multiplicity": springs.multiplicity.numpy()[:count].copy(),
+            # The contact clock as the device holds it (accumulated in float32 by the device steps).
+            "contact_clock": self.integrator.system.contact_clock.numpy().copy(),
             **{f"detector_{key}": value for key, value in self.detector.state_dict().items()},
         }
 
@@ -403,7 +406,11 @@ class ClothSolver:
         self.detector.load_state_dict({key[len("detector_"):]: value for key, value in data.items()
                                        if key.startswith("detector_")})
         self.time = float(np.asarray(data["time"]).reshape(-1)[0])
-        self.integrator.system.set_clock(self.time)
+        clock = np.asarray(data.get("contact_clock", [self.time]), dtype=np.float32).reshape(-1)
+        if clock.shape != (1,) or not np.isfinite(clock[0]):
+            raise InputError("checkpoint", "contact_clock", f"{clock.tolist()} is not one finite time",
+                             "resume from a checkpoint written by pscc simulate")
+        self.integrator.system.contact_clock.assign(clock)
         self._frame_graph = None  # buffers may have been replaced: record again after an eager frame
         self._frame_graph_warm = None
 

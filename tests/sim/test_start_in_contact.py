@@ -8,6 +8,7 @@ from pathlib import Path
 
 import ipctk
 import numpy as np
+import pytest
 
 from pscc.scenes.scene_file import load_scene_file
 from pscc.sim.simulation import Simulation
@@ -61,3 +62,28 @@ def test_layers_starting_inside_the_thickness_separate_gently(tmp_path: Path) ->
     middle = outer[np.argsort(np.linalg.norm(cloth[outer, :2], axis=1))[:9]]
     below = inner[np.argsort(np.linalg.norm(cloth[inner, :2], axis=1))[:9]]
     assert 0.7 * THICKNESS < cloth[middle, 2].mean() - cloth[below, 2].mean() < 1.5 * THICKNESS
+
+
+def test_a_resumed_run_eases_exactly_like_the_uninterrupted_one(tmp_path: Path) -> None:
+    """The easing depends on the time since the start (a device clock): a checkpoint carries the clock, so
+    a run resumed inside the relax time continues bit for bit on the CPU."""
+    from pscc.sim.solver import ClothSolver
+
+    (tmp_path / "scene.toml").write_text(SCENE)
+    scene, contact, _ = load_scene_file(tmp_path / "scene.toml")
+    solver = ClothSolver(scene, device="cpu", contact=contact)
+    state, scratch = solver.initial_state(), solver.initial_state()
+    for _ in range(3):
+        solver.advance_frame(state, scratch, scene.time_step, scene.steps_per_frame)
+    checkpoint = solver.state_dict(state)
+    assert checkpoint["contact_clock"][0] == pytest.approx(3 * scene.frame_time, rel=1e-5)
+    for _ in range(3):
+        solver.advance_frame(state, scratch, scene.time_step, scene.steps_per_frame)
+    expected = state.positions.numpy().copy()
+
+    resumed = ClothSolver(load_scene_file(tmp_path / "scene.toml")[0], device="cpu", contact=contact)
+    state, scratch = resumed.initial_state(), resumed.initial_state()
+    resumed.load_state_dict(checkpoint, state)
+    for _ in range(3):
+        resumed.advance_frame(state, scratch, scene.time_step, scene.steps_per_frame)
+    np.testing.assert_array_equal(state.positions.numpy(), expected)
