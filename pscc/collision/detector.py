@@ -492,13 +492,18 @@ class CollisionDetector:
         return stats
 
     def narrow_phase_device(self, positions_t0: wp.array, positions_t1: wp.array | None = None,
-                            thickness: float = 0.0, *, recheck: bool = False) -> DeviceContacts:
+                            thickness: float = 0.0, *, recheck: bool = False,
+                            defer_dcd: bool = False) -> DeviceContacts:
         """The narrow phase of :meth:`narrow_phase` on device arrays; the result stays on the device.
 
         Tests the candidates of the last broad phase (device or host path). With ``recheck`` (CCD),
         only candidates with a vertex whose start or end position changed since the previous CCD of
         this broad phase are tested again (the first CCD after a broad phase tests every pair). The
         caller keeps the thickness at most the broad phase's, and CCD after a CCD broad phase.
+
+        With ``defer_dcd`` (DCD only), the test itself is left to the caller's kernel, which writes the
+        times of impact and hit counts (:meth:`NarrowPhase.run_device`; the proximity springs do, to find
+        each pair's closest points once).
 
         Returns:
             The :class:`DeviceContacts` view of the candidate rows, their times of impact and
@@ -523,7 +528,8 @@ class CollisionDetector:
         moved = None
         if x1 is not None and recheck:
             moved = self.narrow.mark_moved(self._previous_t0, x0, self._previous_t1, x1)
-        self.narrow.run_device(self.candidates, x0, x1 if x1 is not None else x0, h, moved=moved)
+        self.narrow.run_device(self.candidates, x0, x1 if x1 is not None else x0, h, moved=moved,
+                               defer_dcd=defer_dcd and x1 is None)
         if x1 is not None:
             wp.copy(self._previous_t0, x0)
             wp.copy(self._previous_t1, x1)

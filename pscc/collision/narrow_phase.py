@@ -36,7 +36,12 @@ from pscc.collision.contacts import ContactArgs, DeviceContacts
 from pscc.collision.scratch import view
 from pscc.geometry import distance_tolerances
 from pscc.geometry.ccd import CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
-from pscc.geometry.distance import edge_edge_distance_squared, vertex_face_distance_squared
+from pscc.geometry.distance import (
+    edge_edge_closest_point,
+    edge_edge_distance_squared_at,
+    vertex_face_closest_point,
+    vertex_face_distance_squared_at,
+)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -185,12 +190,13 @@ def _within(distance_sq: float, thickness: float, error: float) -> float:
 
 
 @wp.func
-def _vertex_face_proximity_toi(
-    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, thickness: float, params: CcdParameters,
+def vertex_face_proximity_toi(
+    p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, w: wp.vec3, thickness: float, params: CcdParameters,
     proximity: ProximityParameters,
 ) -> float:
     """0 when vertex p may be within ``thickness`` of triangle (a, b, c), else ``NO_HIT``: closed-form
-    distance for well-shaped faces, else the search."""
+    distance for well-shaped faces (``w``: the closest point's barycentric weights,
+    :func:`pscc.geometry.distance.vertex_face_closest_point`), else the search."""
     ab = b - a
     ac = c - a
     n = wp.cross(ab, ac)
@@ -198,9 +204,31 @@ def _vertex_face_proximity_toi(
     area_sq = wp.dot(n, n)
     if area_sq == 0.0 or area_sq >= proximity.well_shaped_flatness * longest * longest:
         error = proximity.distance_error * _local_scale(a, b, c, p)
-        return _within(vertex_face_distance_squared(p, a, b, c), thickness, error)
+        return _within(vertex_face_distance_squared_at(p, a, b, c, w), thickness, error)
     # Nearly flat triangle: the closed form may overestimate; the inclusion search is exact-safe.
     return vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
+
+
+@wp.func
+def edge_edge_proximity_toi(
+    a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, st: wp.vec2, thickness: float,
+    proximity: ProximityParameters,
+) -> float:
+    """0 when the segments may be within ``thickness``, else ``NO_HIT``: the closed-form distance at the
+    closest points' parameters ``st`` (:func:`pscc.geometry.distance.edge_edge_closest_point`; its bound
+    holds for every edge pair)."""
+    error = proximity.distance_error * _local_scale(a0, a1, b0, b1)
+    return _within(edge_edge_distance_squared_at(a0, a1, b0, b1, st), thickness, error)
+
+
+@wp.struct
+class ProximityTest:
+    """The discrete proximity test of a narrow phase, for a kernel that runs it itself
+    (:meth:`NarrowPhase.proximity_test`)."""
+
+    thickness: wp.float32
+    params: CcdParameters
+    proximity: ProximityParameters
 
 
 @wp.kernel
@@ -223,8 +251,12 @@ def _vertex_face_proximity(
     for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         f = faces[pair[1]]
-        toi = _vertex_face_proximity_toi(positions[pair[0]], positions[f[0]], positions[f[1]], positions[f[2]],
-                                         thickness, params, proximity)
+        p = positions[pair[0]]
+        a = positions[f[0]]
+        b = positions[f[1]]
+        c = positions[f[2]]
+        toi = vertex_face_proximity_toi(p, a, b, c, vertex_face_closest_point(p, a, b, c), thickness, params,
+                                        proximity)
         toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 0, 1)
@@ -254,8 +286,7 @@ def _edge_edge_proximity(
         a1 = positions[ea[1]]
         b0 = positions[eb[0]]
         b1 = positions[eb[1]]
-        error = proximity.distance_error * _local_scale(a0, a1, b0, b1)
-        toi = _within(edge_edge_distance_squared(a0, a1, b0, b1), thickness, error)
+        toi = edge_edge_proximity_toi(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1), thickness, proximity)
         toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 1, 1)
@@ -332,6 +363,7 @@ class NarrowPhase:
         positions_t1: wp.array,
         thickness: float,
         moved: wp.array | None = None,
+        defer_dcd: bool = False,
     ) -> None:
         """Test the valid candidates of each kind, reading their numbers from ``candidates.counts``
         on the device (clamped to the buffers), and fill :attr:`hit_counts`.
@@ -349,6 +381,10 @@ class NarrowPhase:
             positions_t1: (vertex_count,) ``wp.vec3`` end positions, or ``positions_t0`` itself (DCD).
             thickness: the distance tested (length units).
             moved: optional (vertex_count,) int32 marks of the CCD re-check.
+            defer_dcd: DCD only: zero :attr:`hit_counts` but launch nothing; a consumer that runs the
+                same test in its own kernel (:meth:`proximity_test`, e.g.
+                :meth:`pscc.sim.proximity.ProximityContacts.test_and_update_device`) writes the times of
+                impact and the hit counts, bit for bit as this method would.
 
         Raises:
             ValueError: the toi buffers are shorter than the candidate buffers (call :meth:`reserve`).
@@ -366,6 +402,8 @@ class NarrowPhase:
         self._thickness = float(thickness)
         lanes_vf = row_lanes(self.device, candidates.capacity_vf)
         lanes_ee = row_lanes(self.device, candidates.capacity_ee)
+        if positions_t1 is positions_t0 and defer_dcd:
+            return
         if positions_t1 is positions_t0:
             wp.launch(_vertex_face_proximity, dim=lanes_vf,
                       inputs=[self.faces, candidates.vertex_face, positions_t0, float(thickness), self.params,
@@ -386,6 +424,16 @@ class NarrowPhase:
                   inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1, float(thickness),
                           self.params, marks, only_moved, candidates.counts, lanes_ee],
                   outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
+
+    def proximity_test(self, thickness: float) -> ProximityTest:
+        """The discrete test of :meth:`run_device` (DCD at ``thickness``) for a kernel that runs it itself
+        (:func:`vertex_face_proximity_toi`, :func:`edge_edge_proximity_toi`). Allocates: no (a host
+        struct). Capture-safe: yes."""
+        test = ProximityTest()
+        test.thickness = float(thickness)
+        test.params = self.params
+        test.proximity = self.proximity
+        return test
 
     def run(
         self,

@@ -275,7 +275,14 @@ def vertex_face_distance_squared(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3)
     Returns:
         The squared Euclidean distance (length units squared).
     """
-    w = vertex_face_closest_point(p, a, b, c)
+    return vertex_face_distance_squared_at(p, a, b, c, vertex_face_closest_point(p, a, b, c))
+
+
+@wp.func
+def vertex_face_distance_squared_at(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, w: wp.vec3) -> float:
+    """Squared distance from ``p`` to the point of triangle ``(a, b, c)`` with barycentric weights ``w``
+    (with ``w`` from :func:`vertex_face_closest_point`: :func:`vertex_face_distance_squared`, for callers
+    that need the weights too)."""
     r = _vertex_face_offset(p, a, b, c, w)
     return wp.dot(r, r)
 
@@ -351,7 +358,14 @@ def edge_edge_distance_squared(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec
     Returns:
         The squared Euclidean distance (length units squared).
     """
-    st = edge_edge_closest_point(a0, a1, b0, b1)
+    return edge_edge_distance_squared_at(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1))
+
+
+@wp.func
+def edge_edge_distance_squared_at(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, st: wp.vec2) -> float:
+    """Squared distance between the points of parameters ``st`` on the two segments (with ``st`` from
+    :func:`edge_edge_closest_point`: :func:`edge_edge_distance_squared`, for callers that need the
+    parameters too)."""
     r = _edge_edge_offset(a0, a1, b0, b1, st)
     return wp.dot(r, r)
 

@@ -412,10 +412,11 @@ class DeviceStep:
 
         wp.launch(_velocities_from_positions, dim=vertex_count, inputs=[x0, x1, 1.0 / dt],
                   outputs=[state_out.velocities], device=dev)
-        contacts = detector.narrow_phase_device(x1, None, solver.thickness)
+        # The DCD and the springs in one pass (each pair's closest points found once).
+        contacts = detector.narrow_phase_device(x1, None, solver.thickness, defer_dcd=True)
+        solver.proximity.test_and_update_device(contacts, x1, detector.narrow.proximity_test(solver.thickness))
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 0, DCD_VERTEX_FACE], outputs=[report], device=dev)
         wp.launch(_add_counter, dim=1, inputs=[contacts.hit_counts, 1, DCD_EDGE_EDGE], outputs=[report], device=dev)
-        solver.proximity.update_device(contacts.args, x1)
         self._flag(springs.count, 0, springs.capacity, "contact springs")
         self._mark_near_full(springs.count, 0, springs.capacity, NEAR_FULL_SPRINGS)
         wp.launch(_max_counter(springs.count), dim=1, inputs=[springs.count, 0, CONTACTS], outputs=[report], device=dev)

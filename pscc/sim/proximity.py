@@ -41,13 +41,16 @@ from pscc import tolerances
 from pscc._lanes import row_lanes
 from pscc.collision.contacts import (
     ContactArgs,
+    DeviceContacts,
     edge_edge_rows,
     edge_edge_vertices,
     vertex_face_rows,
     vertex_face_vertices,
 )
 from pscc.collision.device_topology import DeviceTopology
+from pscc.collision.narrow_phase import ProximityTest, edge_edge_proximity_toi, vertex_face_proximity_toi
 from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
+from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
 from pscc.mesh.topology import MeshTopology
 from pscc.sim.contact_springs import ContactSprings, MergeTable
 
@@ -134,6 +137,64 @@ def _merge_slot(table: MergeTable, key: wp.int64) -> wp.vec2i:
     return wp.vec2i(-1, 0)
 
 
+@wp.struct
+class SpringArrays:
+    """The spring buffers a kernel appends to (:class:`ContactSprings`)."""
+
+    vertices: wp.array(dtype=wp.vec4i)
+    weights: wp.array(dtype=wp.vec4)
+    normals: wp.array(dtype=wp.vec3)
+    multiplicity: wp.array(dtype=wp.int32)
+    count: wp.array(dtype=wp.int32)
+
+
+@wp.func
+def _append_hit(
+    contacts: ContactArgs,
+    kinematic: wp.array(dtype=wp.int32),
+    face_edges: wp.array(dtype=wp.vec3i),
+    merge: int,
+    table: MergeTable,
+    springs: SpringArrays,
+    edge_edge: int,
+    row: int,
+    ids: wp.vec4i,
+    x0: wp.vec3,
+    x1: wp.vec3,
+    x2: wp.vec3,
+    x3: wp.vec3,
+    w: wp.vec4,
+):
+    """A hit row (vertex ids ``ids`` at ``x0..x3``, closest-point weights ``w``): unless all four vertices
+    are kinematic, append its spring at the next counter slot, or, when an earlier row of the same edge or
+    corner contact did (module docstring), only count it in the merge table."""
+    # Pairs made only of kinematic vertices: nothing can respond to them.
+    if kinematic[ids[0]] != 0 and kinematic[ids[1]] != 0 and kinematic[ids[2]] != 0 and kinematic[ids[3]] != 0:
+        return
+    key = wp.int64(-1)  # no merge: a face-interior or edges-interior contact, or merge off
+    if merge != 0:
+        if edge_edge != 0:
+            key = _edge_edge_key(ids, contacts.edge_edge[row], w)
+        else:
+            key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
+    merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
+    if key >= wp.int64(0):
+        found = _merge_slot(table, key)
+        if found[0] >= 0:
+            wp.atomic_add(table.counts, found[0], 1)
+            if found[1] == 0:
+                return  # counted in the spring of the row that put the key there
+            merged = -(found[0] + 2)
+    slot = wp.atomic_add(springs.count, 0, 1)
+    if slot >= springs.vertices.shape[0]:
+        return  # overflow: the counter keeps the true number for check_capacity()
+    springs.vertices[slot] = ids
+    springs.weights[slot] = w
+    springs.multiplicity[slot] = merged
+    plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
+    springs.normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
+
+
 @wp.kernel
 def _append_contacts(
     # in:
@@ -145,25 +206,19 @@ def _append_contacts(
     lanes: int,
     # out:
     table: MergeTable,
-    vertices: wp.array(dtype=wp.vec4i),
-    weights: wp.array(dtype=wp.vec4),
-    normals: wp.array(dtype=wp.vec3),
-    multiplicity: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
+    springs: SpringArrays,
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows of ``contacts`` followed by its valid
-    edge-edge rows (on the CPU, one thread takes them all in that order). A hit with a free vertex appends
-    its spring (closest-point weights and unit normal) at the next counter slot, unless an earlier row of
-    the same edge or corner contact did (module docstring): then it only counts in the merge table."""
+    edge-edge rows (on the CPU, one thread takes them all in that order): every hit (toi <= 1) goes
+    through :func:`_append_hit` with its closest-point weights."""
     vertex_face_count = vertex_face_rows(contacts)
     for r in range(wp.tid(), vertex_face_count + edge_edge_rows(contacts), lanes):
         edge_edge = int(0)
         row = r
+        ids = wp.vec4i(0, 0, 0, 0)
         if r >= vertex_face_count:
             edge_edge = 1
             row = r - vertex_face_count
-        ids = wp.vec4i(0, 0, 0, 0)
-        if edge_edge != 0:
             if contacts.edge_edge_toi[row] > 1.0:
                 continue
             ids = edge_edge_vertices(contacts, row)
@@ -171,36 +226,65 @@ def _append_contacts(
             if contacts.vertex_face_toi[row] > 1.0:
                 continue
             ids = vertex_face_vertices(contacts, row)
-        # Pairs made only of kinematic vertices: nothing can respond to them.
-        if kinematic[ids[0]] != 0 and kinematic[ids[1]] != 0 and kinematic[ids[2]] != 0 and kinematic[ids[3]] != 0:
-            continue
         x0 = positions[ids[0]]
         x1 = positions[ids[1]]
         x2 = positions[ids[2]]
         x3 = positions[ids[3]]
-        w = pair_weights(x0, x1, x2, x3, edge_edge)
-        key = wp.int64(-1)  # no merge: a face-interior or edges-interior contact, or merge off
-        if merge != 0:
-            if edge_edge != 0:
-                key = _edge_edge_key(ids, contacts.edge_edge[row], w)
-            else:
-                key = _vertex_face_key(face_edges, ids, contacts.vertex_face[row][1], w)
-        merged = int(1)  # the multiplicity, or -(table slot + 2) until _write_multiplicity
-        if key >= wp.int64(0):
-            found = _merge_slot(table, key)
-            if found[0] >= 0:
-                wp.atomic_add(table.counts, found[0], 1)
-                if found[1] == 0:
-                    continue  # counted in the spring of the row that put the key there
-                merged = -(found[0] + 2)
-        slot = wp.atomic_add(count, 0, 1)
-        if slot >= vertices.shape[0]:
-            continue  # overflow: the counter keeps the true number for check_capacity()
-        vertices[slot] = ids
-        weights[slot] = w
-        multiplicity[slot] = merged
-        plane = pair_plane_normal(x0, x1, x2, x3, edge_edge)
-        normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
+        _append_hit(contacts, kinematic, face_edges, merge, table, springs, edge_edge, row, ids, x0, x1, x2, x3,
+                    pair_weights(x0, x1, x2, x3, edge_edge))
+
+
+@wp.kernel
+def _test_and_append(
+    # in:
+    contacts: ContactArgs,
+    kinematic: wp.array(dtype=wp.int32),
+    positions: wp.array(dtype=wp.vec3),
+    face_edges: wp.array(dtype=wp.vec3i),
+    test: ProximityTest,
+    merge: int,
+    lanes: int,
+    # out:
+    hit_counts: wp.array(dtype=wp.int32),
+    table: MergeTable,
+    springs: SpringArrays,
+):
+    """The DCD and :func:`_append_contacts` in one pass, each pair's closest points found once: row kernel
+    over the valid vertex-face rows, then the edge-edge rows; each row gets the narrow phase's discrete
+    test (:func:`pscc.collision.narrow_phase.vertex_face_proximity_toi` / ``edge_edge_proximity_toi``, the
+    time of impact written and the hit counted as :meth:`NarrowPhase.run_device` does), and a hit its
+    spring."""
+    vertex_face_count = vertex_face_rows(contacts)
+    for r in range(wp.tid(), vertex_face_count + edge_edge_rows(contacts), lanes):
+        edge_edge = int(0)
+        row = r
+        ids = wp.vec4i(0, 0, 0, 0)
+        if r >= vertex_face_count:
+            edge_edge = 1
+            row = r - vertex_face_count
+            ids = edge_edge_vertices(contacts, row)
+        else:
+            ids = vertex_face_vertices(contacts, row)
+        x0 = positions[ids[0]]
+        x1 = positions[ids[1]]
+        x2 = positions[ids[2]]
+        x3 = positions[ids[3]]
+        toi = float(0.0)
+        w = wp.vec4(0.0)
+        if edge_edge != 0:
+            st = edge_edge_closest_point(x0, x1, x2, x3)
+            toi = edge_edge_proximity_toi(x0, x1, x2, x3, st, test.thickness, test.proximity)
+            contacts.edge_edge_toi[row] = toi
+            w = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
+        else:
+            closest = vertex_face_closest_point(x0, x1, x2, x3)
+            toi = vertex_face_proximity_toi(x0, x1, x2, x3, closest, test.thickness, test.params, test.proximity)
+            contacts.vertex_face_toi[row] = toi
+            w = wp.vec4(1.0, -closest[0], -closest[1], -closest[2])
+        if toi <= 1.0:
+            wp.atomic_add(hit_counts, edge_edge, 1)
+            _append_hit(contacts, kinematic, face_edges, merge, table, springs, edge_edge, row, ids, x0, x1, x2, x3,
+                        w)
 
 
 @wp.kernel
@@ -295,13 +379,49 @@ class ProximityContacts:
         lanes = row_lanes(self.device, contacts.vertex_face.shape[0] + contacts.edge_edge.shape[0])
         wp.launch(_append_contacts, dim=lanes,
                   inputs=[contacts, self.kinematic_flags, positions, self.face_edges, int(self.merge), lanes],
-                  outputs=[table, springs.vertices, springs.weights, springs.normals, springs.multiplicity,
-                           springs.count],
-                  device=self.device)
+                  outputs=[table, self._spring_arrays()], device=self.device)
+        self._finish(table)
+        return springs
+
+    def test_and_update_device(self, contacts: DeviceContacts, positions: wp.array,
+                               test: ProximityTest) -> ContactSprings:
+        """The DCD of ``contacts`` and :meth:`update_device` in one pass over the rows (each pair's closest
+        points found once): ``contacts`` comes from a narrow phase that left its DCD to this call
+        (``CollisionDetector.narrow_phase_device(..., defer_dcd=True)``), ``test`` is that narrow phase's
+        :meth:`~pscc.collision.narrow_phase.NarrowPhase.proximity_test`. The times of impact, the hit
+        counts and the springs are bit for bit those of the DCD followed by :meth:`update_device`.
+
+        Allocates: no. Capture-safe: yes (as :meth:`update_device`).
+        """
+        springs = self.springs
+        springs.count.zero_()
+        table = springs.merge_table()
+        table.keys.fill_(-1)
+        table.counts.zero_()
+        args = contacts.args
+        lanes = row_lanes(self.device, args.vertex_face.shape[0] + args.edge_edge.shape[0])
+        wp.launch(_test_and_append, dim=lanes,
+                  inputs=[args, self.kinematic_flags, positions, self.face_edges, test, int(self.merge), lanes],
+                  outputs=[contacts.hit_counts, table, self._spring_arrays()], device=self.device)
+        self._finish(table)
+        return springs
+
+    def _spring_arrays(self) -> SpringArrays:
+        springs = self.springs
+        arrays = SpringArrays()
+        arrays.vertices = springs.vertices
+        arrays.weights = springs.weights
+        arrays.normals = springs.normals
+        arrays.multiplicity = springs.multiplicity
+        arrays.count = springs.count
+        return arrays
+
+    def _finish(self, table: MergeTable) -> None:
+        """Merged springs' table slots become their multiplicities."""
+        springs = self.springs
         lanes = row_lanes(self.device, springs.capacity)
         wp.launch(_write_multiplicity, dim=lanes, inputs=[table.counts, springs.count, lanes],
                   outputs=[springs.multiplicity], device=self.device)
-        return springs
 
     def check_capacity(self) -> bool:
         """Whether the last :meth:`update_device` stored every spring; grows the springs when not.

@@ -246,3 +246,36 @@ def test_merged_springs_give_the_system_of_one_spring_per_row(device: str, shift
     (matrix, rhs), (matrix_rows, rhs_rows) = systems
     np.testing.assert_allclose(matrix, matrix_rows, rtol=1e-4, atol=1e-4 * np.abs(matrix_rows).max())
     np.testing.assert_allclose(rhs, rhs_rows, rtol=1e-4, atol=1e-4 * np.abs(rhs_rows).max())
+
+
+def test_the_fused_dcd_and_springs_equal_the_dcd_then_the_springs() -> None:
+    """ProximityContacts.test_and_update_device (the device step's one pass) gives, bit for bit, the times
+    of impact, hit counts and springs of the narrow phase's DCD followed by update_device."""
+    from pscc.collision.detector import CollisionDetector
+    from pscc.mesh.generate import folded_sheet
+
+    mesh = folded_sheet(800, layers=3, seed=4)
+    thickness = 0.6 * float(np.ptp(mesh.vertices[:, 2])) / 2
+    results = []
+    for fused in (False, True):
+        detector = CollisionDetector(mesh.faces, device="cpu")
+        positions = wp.array(mesh.vertices, dtype=wp.vec3)
+        detector.broad_phase(positions, thickness=thickness)
+        proximity = ProximityContacts(mesh.faces, np.zeros(len(mesh.vertices), bool), thickness, "cpu",
+                                      device_topology=detector.device_topology)
+        proximity.springs.ensure(4000)
+        if fused:
+            contacts = detector.narrow_phase_device(positions, None, thickness, defer_dcd=True)
+            springs = proximity.test_and_update_device(contacts, positions, detector.narrow.proximity_test(thickness))
+        else:
+            contacts = detector.narrow_phase_device(positions, None, thickness)
+            springs = proximity.update_device(contacts.args, positions)
+        assert proximity.check_capacity()
+        counts = detector.candidates.counts.numpy()
+        results.append((contacts.args.vertex_face_toi.numpy()[:counts[0]].copy(),
+                        contacts.args.edge_edge_toi.numpy()[:counts[1]].copy(), contacts.hit_counts.numpy().copy(),
+                        *(np.ascontiguousarray(a).copy() for a in _springs(springs))))
+    plain, fused = results
+    assert plain[2].sum() > 100 and len(plain[3]) > 50  # hits and springs to compare
+    for a, b in zip(plain, fused, strict=True):
+        np.testing.assert_array_equal(_bits(a) if a.dtype.kind == "f" else a, _bits(b) if b.dtype.kind == "f" else b)
