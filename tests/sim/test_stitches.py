@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pscc.bench.oracle import crossings as ipctk_crossings
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.collision.seams import SeamAdjacency
@@ -128,3 +129,8 @@ def test_intersection_check_leaves_out_a_closed_seam_only() -> None:
     middle = n + (NX // 2) * (NX + 1) + NX // 2
     crossing[middle, 2] = 0.05
     assert IntersectionCheck(both, len(vertices), "cpu", seams=seams).find(crossing).shape[0] > 0
+    # The ipctk oracle agrees: the seam is its only "crossing", and the pushed vertex a real one.
+    assert ipctk_crossings(vertices, both).shape[0] > 0
+    assert ipctk_crossings(vertices, both, stitches).shape == (0, 3)
+    found = ipctk_crossings(crossing, both, stitches)
+    assert found.shape[0] > 0 and np.any(found[:, :2] == middle)
