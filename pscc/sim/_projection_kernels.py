@@ -39,6 +39,7 @@ class ConstraintArgs:
     normals: wp.array(dtype=wp.vec3)
     step: wp.array(dtype=float)
     count: wp.array(dtype=wp.int32)
+    offset: wp.array(dtype=float)  # per constraint: its floor is separation + offset (0 for a collision)
 
 
 @wp.func
@@ -87,8 +88,44 @@ def _append_constraints(
     constraints.weights[slot] = w
     constraints.normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3),
                                                     pair_plane_normal(x0, x1, x2, x3, edge_edge), start)
+    constraints.offset[slot] = 0.0
     multiplier[slot] = 0.0
     extrapolated[slot] = 0.0
+
+
+@wp.kernel
+def _append_stitch_constraints(
+    # in:
+    stitch_vertices: wp.array(dtype=wp.vec4i),
+    stitch_weights: wp.array(dtype=wp.vec4),
+    positions_t1: wp.array(dtype=wp.vec3),
+    separation: float,
+    slack: float,
+    # out:
+    constraints: ConstraintArgs,
+    multiplier: wp.array(dtype=float),
+    extrapolated: wp.array(dtype=float),
+):
+    """One thread per stitch: six constraints ``+-e_c . d >= -a_c`` on its offset ``d = sum_a w_a x_a``, with
+    ``a_c = max(|d_c|, slack)`` at ``positions_t1``: the response may close the seam but not open it further
+    than the integrator left it (or than ``slack``)."""
+    s = wp.tid()
+    ids = stitch_vertices[s]
+    w = stitch_weights[s]
+    d = w[0] * positions_t1[ids[0]] + w[1] * positions_t1[ids[1]] + w[2] * positions_t1[ids[2]]
+    for c in range(3):
+        allowed = wp.max(wp.abs(d[c]), slack)
+        for side in range(2):
+            slot = wp.atomic_add(constraints.count, 0, 1)
+            if slot < constraints.vertices.shape[0]:
+                n = wp.vec3(0.0)
+                n[c] = 1.0 - 2.0 * float(side)
+                constraints.vertices[slot] = ids
+                constraints.weights[slot] = w
+                constraints.normals[slot] = n
+                constraints.offset[slot] = -allowed - separation
+                multiplier[slot] = 0.0
+                extrapolated[slot] = 0.0
 
 
 @wp.kernel
@@ -278,7 +315,7 @@ def _dual_update(
     gap = float(0.0)
     for j in range(4):
         gap += w[j] * wp.dot(n, positions_t1[ids[j]])
-    deficit = separation - gap
+    deficit = separation + constraints.offset[k] - gap
     old = multiplier[k]
     y = extrapolated[k]
     new = wp.max(y + deficit * step, 0.0)

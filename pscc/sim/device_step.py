@@ -402,6 +402,7 @@ class DeviceStep:
         detector.broad_phase_device(x0, x1, solver.thickness)
         self._flag_detector_overflow()
         solver.projection.reset()
+        solver.add_stitch_constraints(x1)
         wp.launch(_begin_response, dim=1, outputs=[self._control, self._running, self._need_broad_phase,
                                                    self._project, report], device=dev)
         wp.capture_while(self._running, lambda: self._response_round(x0, x1))

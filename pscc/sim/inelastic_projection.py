@@ -78,6 +78,7 @@ from pscc.sim._projection_kernels import (
     _VIOLATION,
     ConstraintArgs,
     _append_constraints,
+    _append_stitch_constraints,
     _begin_iteration,
     _close_block,
     _dual_steps,
@@ -129,6 +130,8 @@ class InelasticProjection:
     vertices            (C,) vec4i       the four vertex ids of each constraint
     weights             (C,) vec4        signed weights w_k
     normals             (C,) vec3        unit contact normal n_k at the time of impact
+    offset              (C,) float32     the constraint's floor is separation + offset_k (0 for a
+                                         collision; a seam's six constraints allow its opening)
     multiplier          (C,) float32     lambda_k (kept across solves of a step: warm start)
     extrapolated        (C,) float32     y_k, the extrapolated multipliers
     step, change        (C,) float32     1 / D_k; the last change of y_k
@@ -190,12 +193,14 @@ class InelasticProjection:
         self.extrapolated = wp.zeros(capacity, dtype=float, device=dev)
         self.step = wp.zeros(capacity, dtype=float, device=dev)
         self.change = wp.zeros(capacity, dtype=float, device=dev)
+        self.offset = wp.zeros(capacity, dtype=float, device=dev)
         args = ConstraintArgs()
         args.vertices = self.vertices
         args.weights = self.weights
         args.normals = self.normals
         args.step = self.step
         args.count = self.constraint_count
+        args.offset = self.offset
         self.constraints = args
         """The constraint buffers as a :class:`ConstraintArgs` (rebuilt when they grow)."""
         self._launches = None
@@ -208,10 +213,10 @@ class InelasticProjection:
         if size > 2**31 - 1:
             raise CapacityError(f"inelastic projection: {needed} constraints exceed the int32 index range; "
                                 "reduce the time step or split the scene")
-        old = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
+        old = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated, self.offset)
         kept = self.capacity
         self._allocate(size)
-        new = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated)
+        new = (self.vertices, self.weights, self.normals, self.multiplier, self.extrapolated, self.offset)
         for src, dst in zip(old, new, strict=True):
             wp.copy(dst, src, count=kept)
 
@@ -295,6 +300,28 @@ class InelasticProjection:
             wp.launch(_append_constraints, dim=rows.shape[0],
                       inputs=[contacts, positions_t0, positions_t1, edge_edge],
                       outputs=[self.constraints, self.multiplier, self.extrapolated], device=dev)
+
+    def add_stitches_device(self, stitch_vertices: wp.array, stitch_weights: wp.array, positions_t1: wp.array,
+                            separation: float, slack: float) -> None:
+        """Append six constraints per stitch that keep the response from opening a seam: each axis
+        component of the stitch's offset ``d = sum_a w_a x_a`` stays within ``max(|d_c|, slack)`` of 0, its
+        value at ``positions_t1`` (the integrator's end positions). Call right after :meth:`reset`, with the
+        ``separation`` the solve will get.
+
+        Args:
+            stitch_vertices: (s,) vec4i ``(i, j, k, j)`` (:attr:`pscc.sim.model.ClothModel.stitch_vertices`).
+            stitch_weights: (s,) vec4 ``(1, -(1 - r), -r, 0)``.
+            positions_t1: (vertex_count,) vec3 end positions [m].
+            separation: the solve's separation [m].
+            slack: the opening always allowed [m].
+
+        Allocates: no. Capture-safe: yes.
+        """
+        if stitch_vertices.shape[0] == 0:
+            return
+        wp.launch(_append_stitch_constraints, dim=stitch_vertices.shape[0], device=self.device,
+                  inputs=[stitch_vertices, stitch_weights, positions_t1, float(separation), float(slack)],
+                  outputs=[self.constraints, self.multiplier, self.extrapolated])
 
     def add(self, vertex_face: np.ndarray, vertex_face_toi: np.ndarray, edge_edge: np.ndarray,
             edge_edge_toi: np.ndarray, positions_t0: wp.array, positions_t1: wp.array) -> None:

@@ -210,8 +210,10 @@ class ClothSolver:
         self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
-        # Room for contact before it happens (the device path flags an overflow and redoes the frame).
-        self.projection.reserve(self.cloth_face_count // 4)
+        # Room for contact before it happens (the device path flags an overflow and redoes the frame), and
+        # for the six constraints of every stitch.
+        self.projection.reserve(self.cloth_face_count // 4 + 6 * int(np.asarray(scene.stitches).shape[0]
+                                                                       if scene.stitches is not None else 0))
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
@@ -259,6 +261,15 @@ class ClothSolver:
                              "=True) in Python), which lets crossing surfaces start but cannot pull them apart")
         self.start_contacts = self._ease_start_contacts(vertices)
         """Cloth vertices that start closer than the thickness to another surface (eased apart)."""
+
+    def add_stitch_constraints(self, positions_t1: wp.array) -> None:
+        """After :meth:`InelasticProjection.reset`: the seams as hard constraints of the step's response
+        (:meth:`InelasticProjection.add_stitches_device`; each seam may close but not open by more than
+        the integrator left it, or the CCD distance). Allocates: no. Capture-safe: yes."""
+        model = self.model
+        if model.stitch_count:
+            self.projection.add_stitches_device(model.stitch_vertices, model.stitch_weights, positions_t1,
+                                                self.separation, self.ccd_distance)
 
     def _ease_start_contacts(self, vertices: np.ndarray) -> int:
         """Find the pairs closer than the thickness h in the initial state and let the contact springs keep
@@ -755,6 +766,7 @@ class ClothSolver:
         positions_t1 = wp.array(x1, dtype=wp.vec3, device=self.device)
         rounds = 0
         self.projection.reset()
+        self.add_stitch_constraints(positions_t1)
         tolerance = self.response_tolerance
         while True:
             mark = time.perf_counter()

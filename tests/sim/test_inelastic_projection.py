@@ -209,3 +209,35 @@ def test_contact_with_two_differently_moving_kinematic_objects_is_resolved(devic
     hits_after, _ = vertex_face_ccd(np.stack([x0[r] for r in rows]), np.stack([result[r] for r in rows]),
                                     minimum_distance=1e-4)
     assert not hits_after.any()
+
+
+def test_a_seam_moves_with_the_vertex_the_response_pushes(device: str) -> None:
+    """Vertex 0 falls through the kinematic triangle (1, 2, 3) and is sewn to the midpoint of the free edge
+    (4, 5) just below it. Without the seam's constraints the response lifts vertex 0 alone and opens the
+    seam; with them (InelasticProjection.add_stitches_device) the edge comes along and the seam stays
+    within its slack."""
+    x0 = np.array([[0.2, 0.2, 0.05], [0, 0, 0], [1, 0, 0], [0, 1, 0], [0.1, 0.2, 0.05], [0.3, 0.2, 0.05]],
+                  dtype=np.float32)
+    x1 = x0.copy()
+    x1[[0, 4, 5], 2] = -0.05  # the seam falls with the vertex
+    inverse_mass = np.array([1.0, 0.0, 0.0, 0.0, 1.0, 1.0])
+    stitch_vertices = wp.array(np.array([[0, 4, 5, 4]], np.int32), dtype=wp.vec4i, device=device)
+    stitch_weights = wp.array(np.array([[1.0, -0.5, -0.5, 0.0]], np.float32), dtype=wp.vec4, device=device)
+    results = []
+    for sewn in (False, True):
+        projection = InelasticProjection(inverse_mass, wp.get_device(device), max_iterations=20000, check_every=8)
+        p0 = wp.array(x0, dtype=wp.vec3, device=device)
+        p1 = wp.array(x1, dtype=wp.vec3, device=device)
+        projection.reset()
+        if sewn:
+            projection.add_stitches_device(stitch_vertices, stitch_weights, p1, 0.01, 0.001)
+        projection.add(np.array([[0, 1, 2, 3]]), np.array([0.5]), EMPTY, np.zeros(0), p0, p1)
+        projection.solve(p1, 0.01, 1e-6)
+        results.append((p1.numpy(), projection.count))
+    (loose, loose_count), (sewn, sewn_count) = results
+    seam = lambda x: x[0] - 0.5 * (x[4] + x[5])  # noqa: E731
+    assert loose_count == 1 and sewn_count == 7  # the collision, and six per stitch
+    assert loose[0, 2] > 0.0 and np.linalg.norm(seam(loose)) > 0.05  # lifted alone: the seam opened
+    assert sewn[0, 2] > 0.0  # the collision is still resolved
+    assert np.abs(seam(sewn)).max() <= 0.001 + 1e-5  # the seam stayed within its slack
+    np.testing.assert_array_equal(sewn[1:4], x1[1:4])  # the kinematic triangle never moves
