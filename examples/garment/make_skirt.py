@@ -19,10 +19,10 @@ GAP = 0.02  # the side seams start open by about this much [m]
 WAIST = 0.95  # height of the waistband [m]
 
 
-def _panel(front: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _panel(front: bool, cells: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One panel: 3-D start positions (half a cylinder around the body, a little wider), its pattern (u, v)
     in metres, and its triangles."""
-    nu, nv = CELLS
+    nu, nv = cells
     u = np.linspace(0.0, PANEL_WIDTH, nu + 1)
     v = np.linspace(0.0, PANEL_HEIGHT, nv + 1)
     uu, vv = np.meshgrid(u, v)  # row j = height v[j]
@@ -39,25 +39,26 @@ def _panel(front: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return positions, pattern, np.asarray(faces)
 
 
-def _side(offset: int, column: int) -> list[int]:
-    nu, nv = CELLS
+def _side(offset: int, column: int, cells: tuple[int, int]) -> list[int]:
+    nu, nv = cells
     return [offset + j * (nu + 1) + column for j in range(nv + 1)]
 
 
-def main(folder: Path | None = None) -> None:
-    """Write ``skirt.obj`` and ``body.obj`` into ``folder`` (default: this script's folder)."""
+def main(folder: Path | None = None, cells: tuple[int, int] = CELLS) -> None:
+    """Write ``skirt.obj`` and ``body.obj`` into ``folder`` (default: this script's folder), each panel cut
+    into ``cells`` (along the width, along the height) grid cells of two triangles."""
     folder = Path(__file__).resolve().parent if folder is None else Path(folder)
-    front, front_uv, faces = _panel(True)
-    back, back_uv, _ = _panel(False)
+    front, front_uv, faces = _panel(True, cells)
+    back, back_uv, _ = _panel(False, cells)
     n = len(front)
     vertices = np.concatenate([front, back])
     # Each panel has its own place in the UV layout (one vertex per (u, v), as sewn patterns are stored).
     uv = np.concatenate([front_uv, back_uv + [PANEL_WIDTH + 0.1, 0.0]])
-    nu = CELLS[0]
+    nu = cells[0]
     # Side seams: the front's end column sewn to the back's start column and the other way round, each
     # vertex to the same height of the other panel (stitch i j k r: vertex i to (1 - r) x_j + r x_k, 0-based).
     stitches = []
-    for a, b in ((_side(0, nu), _side(n, 0)), (_side(n, nu), _side(0, 0))):
+    for a, b in ((_side(0, nu, cells), _side(n, 0, cells)), (_side(n, nu, cells), _side(0, 0, cells))):
         for row, (i, j) in enumerate(zip(a, b, strict=True)):
             k = b[row + 1] if row + 1 < len(b) else b[row - 1]
             stitches.append((i, j, k, 0.0))
