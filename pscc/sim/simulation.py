@@ -86,6 +86,9 @@ class Simulation:
         cloth = self.state.positions.numpy()[: self.solver.cloth_vertex_count]
         writer.write(self.frame, cloth, obstacle_vertices)
         self._last_written = self.frame
+        if self.scene.stitches is not None and self.frame_stats and self.frame_stats[-1].get("frame") == self.frame:
+            # From the positions just written (no extra device read): how far the seams are open.
+            self.frame_stats[-1]["seam_gap"] = seam_gap(cloth, self.scene.stitches)
 
     def checkpoint_state(self) -> dict[str, Any]:
         """Solver state plus the frame counter (see :meth:`ClothSolver.state_dict`)."""
@@ -206,8 +209,9 @@ class Simulation:
                     folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
                     self._last_checkpoint = self.frame
                 if bar is not None:
+                    seams = {} if "seam_gap" not in record else {"seam_gap_mm": f"{1e3 * record['seam_gap']:.2f}"}
                     bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
-                                    halvings=record["counts"]["halvings"], refresh=False)
+                                    halvings=record["counts"]["halvings"], **seams, refresh=False)
                     bar.update(1)
         finally:
             if bar is not None:
@@ -258,6 +262,18 @@ class Simulation:
             "frames": self.frame_stats,
             "device_bytes": solver.device_bytes(),
         }
+
+
+def seam_gap(positions: np.ndarray, stitches: np.ndarray) -> float:
+    """The largest distance [m] of a sewn vertex from its seam point: ``max |x_i - ((1 - r) x_j + r x_k)|`` over
+    the stitch rows ``(i, j, k, r)``; 0 without stitches."""
+    rows = np.asarray(stitches, dtype=np.float64).reshape(-1, 4)
+    if rows.shape[0] == 0:
+        return 0.0
+    x = np.asarray(positions, dtype=np.float64)
+    i, j, k = (rows[:, c].astype(np.int64) for c in range(3))
+    r = rows[:, 3:4]
+    return float(np.linalg.norm(x[i] - ((1.0 - r) * x[j] + r * x[k]), axis=1).max())
 
 
 def _series_patterns(formats: tuple[str, ...]) -> list[str]:

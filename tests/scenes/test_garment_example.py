@@ -47,3 +47,13 @@ def test_the_skirt_sews_its_seams_around_the_body() -> None:
     radius = np.linalg.norm(x[:cloth, :2], axis=1)
     assert radius.min() > 0.16  # outside the body (radius 0.16 m)
     assert options["frames"] == 45
+
+
+def test_a_run_records_the_seam_gap_of_every_frame(tmp_path: Path) -> None:
+    import json
+
+    scene, contact, _ = load_scene_file(FOLDER / "skirt.toml")
+    Simulation(scene, device="cpu", contact=contact).run(3, tmp_path / "run", progress=False)
+    frames = json.loads((tmp_path / "run" / "stats.json").read_text())["frames"]
+    gaps = [record["seam_gap"] for record in frames]
+    assert len(gaps) == 3 and gaps[0] < 0.02 and gaps[-1] < 2 * THICKNESS  # 2 cm open at the start
