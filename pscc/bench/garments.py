@@ -22,7 +22,7 @@ import numpy as np
 
 from pscc.bench.oracle import crossings
 from pscc.scenes.scene_file import load_scene_file
-from pscc.sim.simulation import Simulation
+from pscc.sim.simulation import Simulation, seam_gap
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "garment"
 """The example garment's folder (the bench runs from a checkout)."""
@@ -56,8 +56,6 @@ def run_case(cells: tuple[int, int], frames: int, device: str,
     row["triangles"] = int(scene.faces.shape[0])
     row["stitches"] = int(scene.stitches.shape[0])
     stitches = scene.stitches
-    i, j, k = (stitches[:, c].astype(np.int64) for c in range(3))
-    r = stitches[:, 3:4]
     seconds: list[float] = []
     gaps: list[float] = []
     crossing_frames = halvings = fallbacks = 0
@@ -74,7 +72,7 @@ def run_case(cells: tuple[int, int], frames: int, device: str,
             if not np.all(np.isfinite(x)):
                 raise FloatingPointError(f"frame {frame} holds NaN or Inf")
             if frame >= 2:
-                gaps.append(float(np.linalg.norm(x[i] - ((1.0 - r) * x[j] + r * x[k]), axis=1).max()))
+                gaps.append(seam_gap(x, stitches))
             crossing_frames += int(crossings(x, faces, stitches).shape[0] > 0)
             progress(f"garment {row['triangles']}: frame {frame}/{frames} {seconds[-1]:.2f} s")
         row["bytes_per_triangle"] = sim.solver.device_bytes()["total"] / row["triangles"]
