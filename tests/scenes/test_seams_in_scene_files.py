@@ -122,3 +122,21 @@ def test_bad_seam_tables_name_the_key(tmp_path: Path, extra: str, key: str, patt
         load_scene_file(path)
     assert str(info.value).startswith(f"{path}: cloth[0].{key}: "), str(info.value)
     assert re.search(pattern, str(info.value)), str(info.value)
+
+
+def test_a_loop_is_sewn_to_a_loop_from_the_nearest_vertex() -> None:
+    # The boundary loops of two squares, the second one scaled about its centre by 1.02 and cut twice as
+    # fine: every vertex of the first is sewn to the point of the second at the same fraction of the loop,
+    # starting at the second's vertex nearest the first's start and running the same way round.
+    first, faces_a, rest_a = grid_sheet(2, 2, 1.0, 1.0)
+    second, faces_b, rest_b = grid_sheet(4, 4, 1.0, 1.0)
+    second = (second - 0.5) * 1.02 + 0.5
+    ring_a = [v for v in range(9) if v != 4]
+    ring_b = [v for v in range(25) if v not in (6, 7, 8, 11, 12, 13, 16, 17, 18)]
+    source, closed_a = boundary_path(faces_a, ring_a)
+    target, closed_b = boundary_path(faces_b, ring_b)
+    assert closed_a and closed_b and len(source) == 8 and len(target) == 16
+    rows, _ = sew(source, True, rest_a, target, True, rest_b, first.astype(np.float64), second.astype(np.float64))
+    points = (1.0 - rows[:, 3:4]) * second[rows[:, 1].astype(int)] + rows[:, 3:4] * second[rows[:, 2].astype(int)]
+    # Each seam point lies next to its vertex (the loops match up to the 2 % scale), never across the square.
+    assert np.abs(points - first[rows[:, 0].astype(int)]).max() < 0.02 + 1e-6
