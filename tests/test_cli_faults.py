@@ -291,14 +291,33 @@ def test_crossing_input_is_refused_with_the_scene_file_key(tmp_path: Path, capsy
     assert not (tmp_path / "out").exists()
 
 
-def test_a_run_that_fails_at_its_first_step_leaves_nothing_and_says_why(tmp_path: Path, capsys) -> None:
+def _hold_crossings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Crossing features held by the collision response (their exemption switched off): the first step fails."""
+    from pscc.sim.solver import ClothSolver
+
+    monkeypatch.setattr(ClothSolver, "_join_crossings", lambda self, crossings: None)
+
+
+def test_crossing_sheets_run_with_their_crossings_counted(tmp_path: Path) -> None:
+    """Two sheets crossing at right angles: exempt from collision handling, they run; nothing pulls them
+    apart, and every frame's stats count the crossings left."""
+    scene = tmp_path / "crossing.toml"
+    scene.write_text(CROSSING.format(allow="true"))
+    assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 0
+    frames = json.loads((tmp_path / "out" / "stats.json").read_text())["frames"]
+    assert len(frames) == 2 and all(f["counts"]["intersecting_pairs"] > 0 for f in frames)
+
+
+def test_a_run_that_fails_at_its_first_step_leaves_nothing_and_says_why(tmp_path: Path, capsys,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    _hold_crossings(monkeypatch)
     scene = tmp_path / "crossing.toml"
     scene.write_text(CROSSING.format(allow="true"))
     out = tmp_path / "out"
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(out)]) == 2
     line = capsys.readouterr().err.strip()
     assert len(line.splitlines()) == 1
-    assert "allow_initial_intersections" in line and "cannot pull crossing ones apart" in line
+    assert "allow_initial_intersections" in line and "nothing pushes them apart" in line
     assert f"nothing was kept in {out}" in line
     assert not out.exists()
 
@@ -616,7 +635,8 @@ def test_an_out_dir_name_too_long_is_one_line(tmp_path: Path, capsys) -> None:
     _one_error_line(capsys, "--out-dir: cannot be written: the file name is too long")
 
 
-def test_a_step_failure_names_the_scene_and_the_step(tmp_path: Path, capsys) -> None:
+def test_a_step_failure_names_the_scene_and_the_step(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
+    _hold_crossings(monkeypatch)
     scene = tmp_path / "crossing.toml"
     scene.write_text(CROSSING.format(allow="true"))
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 2

@@ -701,6 +701,15 @@ class CollisionDetector:
         if getattr(self, "front", None) is not None:
             self.front.refresh_loans()
 
+    def set_joined(self, rows: np.ndarray | None) -> None:
+        """Replace the vertex pairs left out of the broad phase (the stitches given at construction, and e.g.
+        a simulator's crossing pairs while they come apart): ``rows`` as for ``stitches``. The detector
+        must be prepared. Allocates: yes. Capture-safe: no (graphs that bound the old arrays must be
+        recorded again)."""
+        self.seams.rebuild(rows)
+        if self.method != "brute-force":
+            self.feature_pairs.topology.seams = self.seams.args
+
     def device_bytes(self) -> dict[str, int]:
         """Device memory per structure, in bytes, and their ``total``."""
         sizes = {

@@ -304,6 +304,10 @@ class IntersectionCheck:
         self._kinds = np.zeros(0, dtype=np.int32)
         self._bounds = np.zeros(0, dtype=np.float32)
 
+    def refresh_seams(self) -> None:
+        """Take the current arrays of :attr:`seams` (after :meth:`SeamAdjacency.rebuild`). Capture-safe: no."""
+        self._topology.seams = self.seams.args
+
     def _allocate_hits(self, capacity: int) -> None:
         self.hit_capacity = capacity
         self.hits = wp.empty(capacity, dtype=wp.vec2i, device=self.device)

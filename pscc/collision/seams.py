@@ -62,6 +62,16 @@ class SeamAdjacency:
 
     def __init__(self, stitches: np.ndarray | None, vertex_count: int, device: wp.DeviceLike) -> None:
         self.device = wp.get_device(device)
+        self.vertex_count = int(vertex_count)
+        self.args = SeamArgs()
+        """The device arrays as the kernels' struct."""
+        self.rebuild(stitches)
+
+    def rebuild(self, stitches: np.ndarray | None) -> None:
+        """Replace the partners with those of ``stitches`` (new arrays: consumers that copied :attr:`args`
+        into a struct of their own assign it again, and graphs that bound the old arrays are recorded
+        again). Allocates: yes. Capture-safe: no."""
+        vertex_count = self.vertex_count
         rows = check_stitches(np.zeros((0, 4)) if stitches is None else stitches, vertex_count, "argument")
         ids = rows[:, :3].astype(np.int64)
         pairs = np.concatenate([ids[:, [0, 1]], ids[:, [0, 2]]]) if ids.size else np.zeros((0, 2), np.int64)
@@ -69,7 +79,6 @@ class SeamAdjacency:
         self.pair_count = int(pairs.shape[0] // 2)
         """Distinct stitched vertex pairs."""
         self.args = SeamArgs()
-        """The device arrays as the kernels' struct."""
         if pairs.size:
             offsets = np.zeros(vertex_count + 1, dtype=np.int32)
             np.add.at(offsets, pairs[:, 0] + 1, 1)

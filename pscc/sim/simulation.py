@@ -65,6 +65,8 @@ class Simulation:
             record = self.solver.advance_frame(self.state, self._next, self.scene.time_step,
                                                self.scene.steps_per_frame, graph=self.graph)
         self.frame += 1
+        if self.solver.intersecting_pairs or self.solver.initial_crossings and self.frame == 1:
+            record["counts"]["intersecting_pairs"] = self.solver.update_tangles(self.state)
         record.update(frame=self.frame, time=self.time, seconds_total=time.perf_counter() - started)
         self.frame_stats.append(record)
         return record

@@ -258,9 +258,74 @@ class ClothSolver:
                              f"(first: edge {edge} through face {face})",
                              "separate the surfaces in the input; to start anyway set allow_initial_intersections "
                              "= true under [contact] in the scene file (ContactConfig(allow_initial_intersections"
-                             "=True) in Python), which lets crossing surfaces start but cannot pull them apart")
+                             "=True) in Python), which lets crossing surfaces start, exempt from collision handling "
+                             "until the cloth's own forces take them apart")
+        self._untangle_check: IntersectionCheck | None = None
+        self.intersecting_pairs = int(initial.shape[0])
+        """Edge-face crossings (involving the cloth) left from a tangled start (:meth:`update_tangles`)."""
+        if initial.shape[0]:
+            self._untangle_check = IntersectionCheck(self.collision_faces, n, self.device)
+            self._join_crossings(initial)
         self.start_contacts = self._ease_start_contacts(vertices)
         """Cloth vertices that start closer than the thickness to another surface (eased apart)."""
+
+    def update_tangles(self, state: ClothState) -> int:
+        """After a frame: the edge-face crossings left from a tangled start, and the pairs exempt from collision
+        handling set to them.
+
+        With ``allow_initial_intersections``, the crossings of the initial state are found and their
+        vertex pairs (each end of the crossing edge with each vertex of the face) are left out of the
+        broad phase and the intersection check, like a stitch's (:mod:`pscc.collision.seams`): the
+        collision response then does not hold the crossing features where they are, and the cloth's own
+        forces (stretch and bending towards its rest shape) can take them apart. After every frame this
+        method counts the crossings that remain with a check that exempts nothing and narrows the exempt
+        pairs to them; at 0 the exemption ends and only the stitches stay. New crossings are still refused
+        (the intersection check flags every crossing outside the exempt pairs). Nothing pushes crossing
+        layers apart beyond their own forces yet.
+
+        Sync point (reads the positions) while crossings remain; nothing once untangled.
+
+        Returns:
+            The crossings left (also :attr:`intersecting_pairs`).
+        """
+        if self._untangle_check is None:
+            return 0
+        positions = state.positions.numpy().astype(np.float32)
+        crossings = self._untangle_check.find(positions)
+        if crossings.shape[0] and self.scene.obstacles:
+            cloth_faces = int(self.scene.faces.shape[0])
+            owners = self._untangle_check.edge_owner_faces[crossings[:, 0]]
+            crossings = crossings[(owners < cloth_faces) | (crossings[:, 1] < cloth_faces)]
+        if self.scene.stitches is not None and crossings.shape[0]:
+            joined = {(int(a), int(b)) for a, b in self._stitch_pairs()}
+            edges = self._untangle_check.edge_vertices
+            keep = [not any((int(e), int(v)) in joined for e in edges[edge] for v in self.collision_faces[face])
+                    for edge, face in crossings[:, :2]]
+            crossings = crossings[np.asarray(keep, dtype=bool)]
+        self.intersecting_pairs = int(crossings.shape[0])
+        if self.intersecting_pairs == 0:
+            self._untangle_check = None
+        self._join_crossings(crossings)
+        return self.intersecting_pairs
+
+    def _stitch_pairs(self) -> np.ndarray:
+        rows = np.asarray(self.scene.stitches, dtype=np.int64).reshape(-1, 4)[:, :3]
+        pairs = np.concatenate([rows[:, [0, 1]], rows[:, [0, 2]]])
+        return np.concatenate([pairs, pairs[:, ::-1]])
+
+    def _join_crossings(self, crossings: np.ndarray) -> None:
+        """Leave the vertex pairs of ``crossings`` (edge id, face id) out of collision handling, with the stitches."""
+        rows = [] if self.scene.stitches is None else [np.asarray(self.scene.stitches, dtype=np.float64).reshape(-1, 4)]
+        if crossings.shape[0]:
+            edges = self.intersection_check.edge_vertices[crossings[:, 0]]
+            faces = self.collision_faces[crossings[:, 1]]
+            a = np.repeat(edges, 3, axis=1).reshape(-1)  # each end of the edge ...
+            p = np.tile(faces, (1, 2)).reshape(-1)  # ... with each vertex of the face
+            rows.append(np.stack([a, p, p, np.zeros_like(a)], axis=1).astype(np.float64))
+        self.detector.set_joined(np.concatenate(rows) if rows else None)
+        self.intersection_check.refresh_seams()
+        self._frame_graph = None  # the graph bound the old arrays: record again
+        self._frame_graph_warm = None
 
     def add_stitch_constraints(self, positions_t1: wp.array) -> None:
         """After :meth:`InelasticProjection.reset`: the seams as hard constraints of the step's response
@@ -422,6 +487,8 @@ class ClothSolver:
             raise InputError("checkpoint", "contact_clock", f"{clock.tolist()} is not one finite time",
                              "resume from a checkpoint written by pscc simulate")
         self.integrator.system.contact_clock.assign(clock)
+        if self.intersecting_pairs:
+            self.update_tangles(state)  # exempt the crossings of the checkpoint's state, as the run had
         self._frame_graph = None  # buffers may have been replaced: record again after an eager frame
         self._frame_graph_warm = None
 
@@ -695,9 +762,10 @@ class ClothSolver:
             if depth >= self.contact.max_step_halvings:
                 if self.initial_crossings:
                     fix = (f"the initial state has {self.initial_crossings} edge-face crossings, let through by "
-                           "allow_initial_intersections = true; the collision response stops surfaces from "
-                           "crossing further but cannot pull crossing ones apart, and their contacts make steps "
-                           "fail like this. Fix: separate the surfaces in the input")
+                           f"allow_initial_intersections = true ({self.intersecting_pairs} still crossing); their "
+                           "pairs are exempt from collision handling until they come apart, but nothing pushes "
+                           "them apart beyond the cloth's own forces, and the features around them may still "
+                           "collide like this. Fix: separate the surfaces in the input")
                 else:
                     fix = ("Fix: use a smaller time step (more steps_per_frame), allow more max_step_halvings or "
                            "max_response_rounds under [contact], or check the scene for surfaces squeezed "
