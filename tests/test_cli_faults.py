@@ -616,12 +616,12 @@ def test_paths_that_are_not_files_say_what_they_are(mesh_file: Path, tmp_path: P
 
 def test_a_sequence_pattern_that_cannot_be_searched_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                              capsys) -> None:
-    from pscc.scenes import scene_builder
+    from pscc.scenes import obstacle_tables
 
     def unsearchable(pattern: Path) -> list[Path]:
         raise OSError(errno.EINVAL, "Invalid argument", "/proc/1/task/1/net")
 
-    monkeypatch.setattr(scene_builder, "_glob", unsearchable)
+    monkeypatch.setattr(obstacle_tables, "_glob", unsearchable)
     scene = tmp_path / "scene.toml"
     scene.write_text("[[cloth]]\n[cloth.sheet]\nsize = [0.3, 0.3]\ncells = [4, 4]\n[[obstacle]]\n"
                      "sequence = \"/**/*.obj\"\n")

@@ -7,11 +7,7 @@ the problem and the fix. :mod:`pscc.scenes.scene_file` is the public entry point
 
 from __future__ import annotations
 
-import difflib
-import math
-import os
-import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import Field, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -20,18 +16,20 @@ import numpy as np
 
 from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
-from pscc.mesh.animation import ANIMATION_EXTENSIONS, Animation, load_animation
-from pscc.mesh.generate import grid_sheet, icosphere
-from pscc.mesh.io import SUPPORTED_EXTENSIONS, load_mesh
-from pscc.mesh.mesh_data import MeshData
-from pscc.scenes.scene_motions import PivotedMotion, SequenceObstacle
+from pscc.mesh.generate import grid_sheet
+from pscc.scenes.obstacle_tables import ObstacleTables
+from pscc.scenes.rest_shapes import FLATNESS_TOLERANCE, REST_BENDING, REST_MODES, RestShapes, plane_coordinates
+from pscc.scenes.scene_motions import PivotedMotion
 from pscc.scenes.seam_builder import boundary_path, sew
+from pscc.scenes.table_reader import PLACEMENT_KEYS, show, type_name
 from pscc.scenes.toml_text import config_to_toml, field_kind
-from pscc.sim.config import SIM_MIN_REST_AREA_RATIO, ClothMaterial, SolverConfig
+from pscc.sim.config import ClothMaterial, SolverConfig
 from pscc.sim.contact_config import ContactConfig
-from pscc.sim.obstacles import Handle, KeyframedMotion, Obstacle, rotation_from_axis_angle, static_motion
+from pscc.sim.obstacles import Handle, static_motion
 from pscc.sim.scene import Scene
 from pscc.tolerances import MIN_COORDINATE_SCALE
+
+__all__ = ["FLATNESS_TOLERANCE", "SceneBuilder", "SceneFile"]
 
 DEFAULT_FRAMES: int = 30
 """Frames of a run when ``[scene] frames`` is not given."""
@@ -48,14 +46,6 @@ MAX_STEPS_PER_FRAME = 100_000
 MIN_TIME_STEP = 1.0e-7
 """Smallest time step [s] a scene file may ask for (below it a run of one second takes 10 million steps)."""
 
-MAX_SCENE_NUMBER = 1.0e9
-"""Largest magnitude of any number in a scene file (lengths, angles in degrees, times, rates): beyond it
-positions leave the detector's float32 range (``tolerances.MAX_COORDINATE``)."""
-
-FLATNESS_TOLERANCE: float = 1.0e-4
-"""A mesh counts as flat (so its rest shape can be its projection onto the best-fit plane) when no
-vertex is farther from that plane than this fraction of the mesh's largest extent. Dimensionless."""
-
 SIDE_TOLERANCE: float = 1.0e-4
 """Default tolerance of the ``side`` selector, as a fraction of the piece's largest rest extent."""
 
@@ -69,29 +59,14 @@ SIDES: tuple[str, ...] = ("left", "right", "bottom", "top")
 CORNERS: tuple[str, ...] = ("bottom-left", "bottom-right", "top-left", "top-right")
 """Corner names of the ``corner`` selector (rest coordinates; bottom/top = v, left/right = u)."""
 
-_REST_MODES: tuple[str, ...] = ("auto", "uv", "file", "plane", "mesh")
-_REST_BENDING: tuple[str, ...] = ("mesh", "flat")
-UV_AREA_RATIO_LIMIT: float = 4.0
-"""``rest = "uv"`` is refused when the pattern's area (times ``uv_scale`` squared) and the mesh's differ by
-more than this factor: the texture coordinates are then not in metres (the message gives the
-``uv_scale`` that matches the areas)."""
-
 _TOP_KEYS = ("scene", "solver", "contact", "cloth", "obstacle")
 _SCENE_KEYS = ("name", "description", "frame_rate", "frame_time", "steps_per_frame", "frames")
-_PLACEMENT_KEYS = ("translate", "rotate", "scale")
-_CLOTH_KEYS = ("name", "mesh", "rest", "uv_scale", "rest_bending", "sheet", *_PLACEMENT_KEYS, "material", "pins",
+_CLOTH_KEYS = ("name", "mesh", "rest", "uv_scale", "rest_bending", "sheet", *PLACEMENT_KEYS, "material", "pins",
                "handles", "stitches")
 _STITCH_KEYS = ("vertices", "to", "to_piece", "reverse")
 _SHEET_KEYS = ("size", "cells")
 _HANDLE_KEYS = ("name", "vertices", "times", "translations", "rotations", "pivot")
-_OBSTACLE_KEYS = ("name", "mesh", "sphere", "box", "sequence", "sequence_frame_rate", "sequence_prim",
-                  *_PLACEMENT_KEYS, "keyframes")
-_OBSTACLE_SHAPES = ("mesh", "sphere", "box", "sequence")
-_SPHERE_KEYS = ("radius", "subdivisions")
-_BOX_KEYS = ("size",)
-_KEYFRAME_KEYS = ("times", "translations", "rotations")
 _SELECTOR_KEYS = ("ids", "side", "corner", "box", "tolerance")
-
 
 
 @dataclass
@@ -129,153 +104,14 @@ class _Piece:
     handles: list[tuple[str, np.ndarray, Any]] = field(default_factory=list)  # (name, local ids, motion or None)
 
 
-def _type_name(value: Any) -> str:
-    if isinstance(value, bool):
-        return "boolean"
-    if isinstance(value, int):
-        return "integer"
-    if isinstance(value, float):
-        return "float"
-    if isinstance(value, str):
-        return "string"
-    if isinstance(value, list):
-        return "array"
-    if isinstance(value, dict):
-        return "table"
-    return type(value).__name__
+class SceneBuilder(RestShapes, ObstacleTables):
+    """Checks a parsed scene file and builds the scene and the resolved spec (the value checks are
+    :class:`~pscc.scenes.table_reader.TableReader`'s, the rest shapes :class:`~pscc.scenes.rest_shapes.RestShapes`',
+    the obstacles and keyframes :class:`~pscc.scenes.obstacle_tables.ObstacleTables`').
 
-
-def _show(value: Any, limit: int = 60) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-class SceneBuilder:
-    """Checks a parsed scene file and builds the scene and the resolved spec."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.source = str(path)
-        self.base = path.parent
-
-    # ------------------------------------------------------------ error helpers
-
-    def error(self, key: str, problem: str, fix: str) -> InputError:
-        return InputError(self.source, key, problem, fix)
-
-    def rewrap(self, exc: InputError, key: str) -> InputError:
-        """An InputError from a lower layer, reported at ``key`` of this file."""
-        inner = "" if exc.source in ("argument", "motion", "ClothMaterial", "SolverConfig", "ContactConfig") \
-            else f"{exc.source}: "
-        return InputError(self.source, key, f"{inner}{exc.field}: {exc.problem}", exc.fix)
-
-    def table(self, value: Any, key: str, example: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.error(key, f"expected a table, got {_type_name(value)} {_show(value)}", f"write it as {example}")
-        return value
-
-    def check_keys(self, table: Mapping[str, Any], allowed: Iterable[str], key: str,
-                   hints: Mapping[str, str] | None = None) -> None:
-        allowed = tuple(allowed)
-        for name in table:
-            if name in allowed:
-                continue
-            where = f"{key}.{name}" if key else name
-            if hints and name in hints:
-                raise self.error(where, f"unknown key {name!r} here", hints[name])
-            close = difflib.get_close_matches(name, allowed, n=1, cutoff=0.6)
-            listing = ", ".join(allowed)
-            fix = (f"did you mean {close[0]!r}? (allowed keys here: {listing})" if close
-                   else f"remove it or use one of the allowed keys: {listing}")
-            raise self.error(where, f"unknown key {name!r}", fix)
-
-    def number(self, value: Any, key: str, *, minimum: float | None = None, strict: bool = True,
-               example: str = "1.0") -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(key, f"expected a number, got {_type_name(value)} {_show(value)}",
-                             f"write a number, e.g. {key.rsplit('.', 1)[-1]} = {example}")
-        number = float(value)
-        if not math.isfinite(number):
-            raise self.error(key, f"{value!r} is not finite", "write a finite number")
-        if abs(number) > MAX_SCENE_NUMBER:
-            raise self.error(key, f"{value!r} is beyond +-{MAX_SCENE_NUMBER:g}, outside what the simulator can "
-                             "represent (tolerances.MAX_COORDINATE)", f"write a number of magnitude <= "
-                             f"{MAX_SCENE_NUMBER:g}")
-        if minimum is not None and (number <= minimum if strict else number < minimum):
-            relation = ">" if strict else ">="
-            raise self.error(key, f"{value!r} is not {relation} {minimum:g}", f"write a number {relation} {minimum:g}")
-        return number
-
-    def integer(self, value: Any, key: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(key, f"expected an integer, got {_type_name(value)} {_show(value)}",
-                             "write a whole number without a decimal point, e.g. 8")
-        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-            bounds = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
-            raise self.error(key, f"{value} is not {bounds}", f"write an integer {bounds}")
-        return int(value)
-
-    def string(self, value: Any, key: str, choices: Iterable[str] | None = None) -> str:
-        if not isinstance(value, str):
-            raise self.error(key, f"expected a string, got {_type_name(value)} {_show(value)}",
-                             'write it in double quotes, e.g. "text"')
-        if choices is not None:
-            choices = tuple(choices)
-            if value not in choices:
-                close = difflib.get_close_matches(value, choices, n=1, cutoff=0.6)
-                hint = f"did you mean {close[0]!r}? " if close else ""
-                raise self.error(key, f"{value!r} is not one of {', '.join(map(repr, choices))}",
-                                 f"{hint}use one of {', '.join(map(repr, choices))}")
-        return value
-
-    def boolean(self, value: Any, key: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.error(key, f"expected true or false, got {_type_name(value)} {_show(value)}",
-                             "write true or false (lower case, no quotes)")
-        return value
-
-    def vector(self, value: Any, key: str, length: int, *, minimum: float | None = None,
-               example: str = "[0.0, 0.0, 0.0]") -> list[float]:
-        if not isinstance(value, list) or len(value) != length:
-            got = f"{len(value)} entries" if isinstance(value, list) else f"{_type_name(value)} {_show(value)}"
-            raise self.error(key, f"expected an array of {length} numbers, got {got}", f"write e.g. {example}")
-        return [self.number(item, f"{key}[{i}]", minimum=minimum) for i, item in enumerate(value)]
-
-    def int_vector(self, value: Any, key: str, length: int, minimum: int, example: str) -> list[int]:
-        if not isinstance(value, list) or len(value) != length:
-            got = f"{len(value)} entries" if isinstance(value, list) else f"{_type_name(value)} {_show(value)}"
-            raise self.error(key, f"expected an array of {length} integers, got {got}", f"write e.g. {example}")
-        return [self.integer(item, f"{key}[{i}]", minimum=minimum) for i, item in enumerate(value)]
-
-    def rows(self, value: Any, key: str, count: int, what: str) -> list[list[float]]:
-        if not isinstance(value, list):
-            raise self.error(key, f"expected an array of [x, y, z] rows, got {_type_name(value)} {_show(value)}",
-                             f"write one [x, y, z] {what} per keyframe time")
-        if len(value) != count:
-            raise self.error(key, f"has {len(value)} rows but times has {count}",
-                             f"give one [x, y, z] {what} per keyframe time ({count})")
-        return [self.vector(row, f"{key}[{i}]", 3) for i, row in enumerate(value)]
-
-    def file_path(self, value: Any, key: str) -> Path:
-        text = self.string(value, key)
-        if not text:
-            raise self.error(key, "is empty", "write the path of a file, relative to the scene file")
-        candidate = Path(os.path.expanduser(text))
-        return Path(os.path.abspath(candidate if candidate.is_absolute() else self.base / candidate))
-
-    def mesh(self, value: Any, key: str) -> tuple[Path, MeshData]:
-        mesh_path = self.file_path(value, key)
-        if mesh_path.suffix.lower() not in SUPPORTED_EXTENSIONS:
-            raise self.error(key, f"{str(mesh_path)!r} has the extension {mesh_path.suffix or '(none)'!r}",
-                             f"use a mesh file ending in one of {', '.join(SUPPORTED_EXTENSIONS)}")
-        if not mesh_path.is_file():
-            raise self.error(key, f"mesh file {str(mesh_path)!r} does not exist",
-                             "check the path; relative paths are relative to the scene file's folder "
-                             f"{str(self.base)!r}")
-        try:
-            return mesh_path, load_mesh(mesh_path)
-        except InputError as exc:
-            raise self.rewrap(exc, key) from exc
+    Args:
+        path: the scene file.
+    """
 
     # ------------------------------------------------------------ top level
 
@@ -299,7 +135,7 @@ class SceneBuilder:
         if isinstance(cloth_raw, dict):
             raise self.error("cloth", "is a single [cloth] table", "write each piece as [[cloth]] (double brackets)")
         if not isinstance(cloth_raw, list) or not cloth_raw or not all(isinstance(c, dict) for c in cloth_raw):
-            raise self.error("cloth", f"expected one or more [[cloth]] tables, got {_show(cloth_raw)}",
+            raise self.error("cloth", f"expected one or more [[cloth]] tables, got {show(cloth_raw)}",
                              "write each cloth piece as a [[cloth]] table")
         pieces: list[_Piece] = []
         spec["cloth"] = []
@@ -318,7 +154,7 @@ class SceneBuilder:
             raise self.error("obstacle", "is a single [obstacle] table",
                              "write each obstacle as [[obstacle]] (double brackets)")
         if not isinstance(obstacle_raw, list) or not all(isinstance(o, dict) for o in obstacle_raw):
-            raise self.error("obstacle", f"expected [[obstacle]] tables, got {_show(obstacle_raw)}",
+            raise self.error("obstacle", f"expected [[obstacle]] tables, got {show(obstacle_raw)}",
                              "write each obstacle as an [[obstacle]] table")
         obstacles: list[Any] = []
         spec["obstacle"] = []
@@ -419,9 +255,6 @@ class SceneBuilder:
             raise self.rewrap_field(exc, key) from exc
         return config, config_to_toml(config)
 
-    def rewrap_field(self, exc: InputError, key: str) -> InputError:
-        return InputError(self.source, f"{key}.{exc.field}", exc.problem, exc.fix)
-
     def config_value(self, value: Any, key: str, spec_field: Field) -> Any:
         kind = field_kind(spec_field)
         default = spec_field.default
@@ -445,16 +278,6 @@ class SceneBuilder:
         return value
 
     # ------------------------------------------------------------ cloth
-
-    def placement(self, table: Mapping[str, Any], key: str) -> tuple[dict[str, Any], np.ndarray, np.ndarray, float]:
-        translate = self.vector(table.get("translate", [0.0, 0.0, 0.0]), f"{key}.translate", 3,
-                                example="[0.0, 0.0, 0.5]  # metres")
-        rotate = self.vector(table.get("rotate", [0.0, 0.0, 0.0]), f"{key}.rotate", 3,
-                             example="[90.0, 0.0, 0.0]  # rotation vector in degrees")
-        scale = self.number(table.get("scale", 1.0), f"{key}.scale", minimum=0.0, example="0.01")
-        rotation = rotation_from_axis_angle(np.radians(np.asarray(rotate, dtype=np.float64)))
-        spec = {"translate": translate, "rotate": rotate, "scale": scale}
-        return spec, rotation, np.asarray(translate, dtype=np.float64), scale
 
     def cloth(self, raw: dict[str, Any], index: int) -> tuple[_Piece, dict[str, Any]]:
         key = f"cloth[{index}]"
@@ -498,7 +321,7 @@ class SceneBuilder:
             spec["sheet"] = {"size": size, "cells": cells}
         else:
             mesh_path, mesh = self.mesh(raw["mesh"], f"{key}.mesh")
-            mode = self.string(raw.get("rest", "auto"), f"{key}.rest", _REST_MODES)
+            mode = self.string(raw.get("rest", "auto"), f"{key}.rest", REST_MODES)
             local = mesh.vertices.astype(np.float64)
             faces = mesh.faces
             requested = mode
@@ -518,7 +341,7 @@ class SceneBuilder:
                                  "remove it, or set rest = \"mesh\"")
             if mode == "mesh":
                 spec["rest_bending"] = self.string(raw.get("rest_bending", "mesh"), f"{key}.rest_bending",
-                                                   _REST_BENDING)
+                                                   REST_BENDING)
         vertices = (scale * local) @ rotation.T + translation
         spec.update(placement)
         material, spec["material"] = self.config(raw.get("material", {}), f"{key}.material", ClothMaterial)
@@ -530,118 +353,10 @@ class SceneBuilder:
         seams_raw = raw.get("stitches", [])
         if isinstance(seams_raw, dict) or not isinstance(seams_raw, list) or not all(isinstance(t, dict)
                                                                                     for t in seams_raw):
-            raise self.error(f"{key}.stitches", f"expected [[cloth.stitches]] tables, got {_show(seams_raw)}",
+            raise self.error(f"{key}.stitches", f"expected [[cloth.stitches]] tables, got {show(seams_raw)}",
                              "write each seam as a [[cloth.stitches]] table with vertices and to")
         piece.seam_tables = seams_raw
         return piece, spec
-
-    def mesh_rest(self, mesh: Any, mode: str, scale: float, uv_scale: float, piece_key: str,
-                  mesh_path: str) -> tuple[np.ndarray, str]:
-        """Rest coordinates of a mesh piece and the resolved mode.
-
-        ``uv``: the file's texture coordinates times ``uv_scale`` (metres per uv unit); ``file``: the NPZ
-        ``rest`` times the placement scale; ``plane``: the positions projected onto their best-fit plane;
-        ``mesh``: the positions themselves, (n, 3) (each triangle keeps its own rest shape). ``auto`` takes
-        uv, then the NPZ rest, then the plane when the mesh is flat, and refuses a curved mesh without
-        either.
-        """
-        key = f"{piece_key}.rest"
-        if mode == "uv" or (mode == "auto" and mesh.uv is not None):
-            if mesh.uv is None and mesh.uv_issue is not None:
-                raise self.error(key, f"rest = \"uv\" but the texture coordinates of {mesh_path!r} are not one (u, v) "
-                                 f"per vertex: {mesh.uv_issue}",
-                                 "split the vertices along the UV seams (one vertex per texture coordinate, as sewn-"
-                                 "pattern garment files do) and join the pieces with stitches, or use rest = \"mesh\"")
-            if mesh.uv is None:
-                raise self.error(key, f"rest = \"uv\" but {mesh_path!r} has no texture coordinates",
-                                 "export the garment with its UV layout (OBJ 'vt' lines and f v/vt faces, PLY s,t "
-                                 "properties or an NPZ 'uv' key), or use rest = \"mesh\" to take the mesh's own shape")
-            return self.uv_rest(mesh, scale, uv_scale, piece_key, mesh_path), "uv"
-        if mode == "mesh":
-            return mesh.vertices.astype(np.float64) * scale, "mesh"
-        has_rest = mesh.rest is not None
-        if mode == "file" or (mode == "auto" and has_rest):
-            if not has_rest:
-                raise self.error(key, f"rest = \"file\" but {mesh_path!r} has no rest coordinates",
-                                 "use an NPZ file with a 'rest' key of (n, 2) (u, v) coordinates in metres, or "
-                                 "rest = \"plane\" to project the positions onto their best-fit plane")
-            file_rest = mesh.rest.astype(np.float64) * scale
-            if file_rest.shape[1] == 2:
-                return file_rest, "file"
-            flat, distance, size = _plane_coordinates(file_rest)
-            if distance > FLATNESS_TOLERANCE * size:
-                raise self.error(key, f"the 3-D rest coordinates in {mesh_path!r} are not flat (a vertex is "
-                                 f"{distance:.3g} m from their best-fit plane)",
-                                 "store (n, 2) (u, v) rest coordinates in the NPZ 'rest' key")
-            return flat, "file"
-        positions = mesh.vertices.astype(np.float64) * scale
-        flat, distance, size = _plane_coordinates(positions)
-        if mode == "auto" and distance > FLATNESS_TOLERANCE * size:
-            unusable = "" if mesh.uv_issue is None else f" (its texture coordinates cannot be: {mesh.uv_issue})"
-            raise self.error(key, f"{mesh_path!r} has no usable texture or rest coordinates{unusable} and is not flat "
-                             f"(a vertex is {distance:.3g} m from the best-fit plane of the positions, more than "
-                             f"{FLATNESS_TOLERANCE:g} x the mesh size), so its rest shape is unknown",
-                             "set rest = \"mesh\" to take the mesh's own curved shape as the rest shape (what "
-                             "cloth tools do for a garment without a pattern), give the file its UV layout "
-                             "(rest = \"uv\"), or set rest = \"plane\" to use the projection onto the best-fit "
-                             "plane anyway (this distorts the rest lengths of curved parts)")
-        return flat, "plane"
-
-    def uv_rest(self, mesh: Any, scale: float, uv_scale: float, piece_key: str, mesh_path: str) -> np.ndarray:
-        """The texture coordinates times ``uv_scale`` as the pattern, refused when their area and the placed
-        mesh's differ by more than :data:`UV_AREA_RATIO_LIMIT` (uv not in metres: the message gives the
-        ``uv_scale`` that matches the areas)."""
-        pattern = mesh.uv.astype(np.float64) * uv_scale
-        corners = pattern[mesh.faces.astype(np.int64)]
-        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-        pattern_area = 0.5 * float(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
-        placed = mesh.vertices.astype(np.float64)[mesh.faces.astype(np.int64)] * scale
-        mesh_area = 0.5 * float(np.linalg.norm(np.cross(placed[:, 1] - placed[:, 0], placed[:, 2] - placed[:, 0]),
-                                               axis=1).sum())
-        if pattern_area > 0.0 and mesh_area > 0.0:
-            ratio = pattern_area / mesh_area
-            if not 1.0 / UV_AREA_RATIO_LIMIT <= ratio <= UV_AREA_RATIO_LIMIT:
-                matching = uv_scale * (mesh_area / pattern_area) ** 0.5
-                raise self.error(f"{piece_key}.uv_scale", f"the texture coordinates of {mesh_path!r} times uv_scale = "
-                                 f"{uv_scale:g} cover {pattern_area:.4g} m^2, {ratio:.3g} times the mesh's "
-                                 f"{mesh_area:.4g} m^2: they are not a pattern in metres",
-                                 f"set uv_scale = {matching:.6g} (metres per uv unit; this matches the areas), or use "
-                                 "rest = \"mesh\"")
-        return pattern
-
-    def check_rest_triangles(self, rest: np.ndarray, mesh: MeshData, requested: str, mode: str, key: str,
-                             mesh_path: str) -> None:
-        """Refuse a rest shape with a zero-area triangle here, naming the scene file and ``key``.
-
-        The solver's cloth model refuses it too (same bound, ``SIM_MIN_REST_AREA_RATIO``), but there
-        the message can only say ``argument: rest``. Causes: a curved mesh projected with
-        ``rest = "plane"``, degenerate rest coordinates in the file, or a zero-area face in the mesh.
-        """
-        bad = _zero_area_faces(np.asarray(rest, dtype=np.float32), mesh.faces)  # float32: what the model sees
-        if not bad.size:
-            return
-        face = int(bad[0])
-        where = f"face {face} {mesh.faces[face].tolist()} of {mesh_path!r} ({bad.size} of {mesh.face_count} faces)"
-        if mode == "plane" and face in set(_zero_area_faces(mesh.vertices, mesh.faces).tolist()):
-            raise self.error(key, f"{where} has zero area in the mesh itself, so it has no rest shape",
-                             "remove the zero-area faces from the mesh, or store (n, 2) (u, v) rest coordinates in "
-                             "an NPZ 'rest' key and use rest = \"file\"")
-        if mode == "plane":
-            how = "rest = \"plane\"" if requested == "plane" else "rest = \"auto\" (the mesh looks flat)"
-            raise self.error(key, f"{how} projects the mesh onto its best-fit plane, which folds {where} to zero "
-                             "area: the mesh is too curved for that projection to be its rest shape",
-                             "store (n, 2) (u, v) rest coordinates (e.g. its UV unwrap, in metres) in an NPZ "
-                             "'rest' key and use rest = \"file\"")
-        if mode == "uv":
-            raise self.error(key, f"the texture coordinates give {where} zero area",
-                             "give every face three distinct, non-collinear (u, v) in the UV layout, or use "
-                             "rest = \"mesh\"")
-        if mode == "mesh":
-            raise self.error(key, f"rest = \"mesh\" takes the mesh's own shape, in which {where} has zero area",
-                             "remove the zero-area faces from the mesh, or give it a UV layout (rest = \"uv\")")
-        raise self.error(key, f"the rest coordinates in the file give {where} zero area",
-                         "give every face three non-collinear (u, v) rest coordinates in the NPZ 'rest' key, or "
-                         "remove that face")
 
     def seam(self, table: Mapping[str, Any], index: int, pieces: list[_Piece], key: str) -> tuple[np.ndarray,
                                                                                                    dict[str, Any]]:
@@ -661,7 +376,7 @@ class SceneBuilder:
         reverse = None
         if "reverse" in table:
             if not isinstance(table["reverse"], bool):
-                raise self.error(f"{key}.reverse", f"expected true or false, got {_show(table['reverse'])}",
+                raise self.error(f"{key}.reverse", f"expected true or false, got {show(table['reverse'])}",
                                  "write reverse = true to run the second boundary the other way")
             reverse = table["reverse"]
         paths = []
@@ -705,7 +420,7 @@ class SceneBuilder:
         handles_raw = raw.get("handles", [])
         if isinstance(handles_raw, dict) or not isinstance(handles_raw, list) \
                 or not all(isinstance(h, dict) for h in handles_raw):
-            raise self.error(f"{key}.handles", f"expected [[cloth.handles]] tables, got {_show(handles_raw)}",
+            raise self.error(f"{key}.handles", f"expected [[cloth.handles]] tables, got {show(handles_raw)}",
                              "write each handle as a [[cloth.handles]] table (double brackets)")
         spec["handles"] = []
         for j, handle_raw in enumerate(handles_raw):
@@ -743,8 +458,8 @@ class SceneBuilder:
         for i, item in enumerate(items):
             where = f"{key}[{i}]" if isinstance(value, list) else key
             if isinstance(item, bool) or not isinstance(item, int | dict):
-                raise self.error(where, f"expected a vertex id or a selector table, got {_type_name(item)} "
-                                 f"{_show(item)}", f"write e.g. {example}")
+                raise self.error(where, f"expected a vertex id or a selector table, got {type_name(item)} "
+                                 f"{show(item)}", f"write e.g. {example}")
             if isinstance(item, int):
                 selected.append(self.ids([item], n, where))
                 continue
@@ -757,13 +472,13 @@ class SceneBuilder:
                 raise self.error(f"{where}.tolerance", "tolerance applies to side only", "remove it or add side")
             if "ids" in item:
                 if not isinstance(item["ids"], list):
-                    raise self.error(f"{where}.ids", f"expected an array of vertex ids, got {_show(item['ids'])}",
+                    raise self.error(f"{where}.ids", f"expected an array of vertex ids, got {show(item['ids'])}",
                                      "write ids = [0, 1, 2]")
                 selected.append(self.ids(item["ids"], n, f"{where}.ids"))
             if "side" in item or "corner" in item:
                 rest = piece.rest.astype(np.float64)
                 if rest.shape[1] == 3:  # a 3-D rest shape: sides and corners of its best-fit plane
-                    rest = _plane_coordinates(rest)[0]
+                    rest = plane_coordinates(rest)[0]
                 low, high = rest.min(axis=0), rest.max(axis=0)
                 extent = float((high - low).max())
             if "side" in item:
@@ -787,7 +502,7 @@ class SceneBuilder:
                 box = item["box"]
                 if not isinstance(box, list) or len(box) != 2:
                     raise self.error(f"{where}.box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got "
-                                     f"{_show(box)}", "write box = [[xmin, ymin, zmin], [xmax, ymax, zmax]] in metres")
+                                     f"{show(box)}", "write box = [[xmin, ymin, zmin], [xmax, ymax, zmax]] in metres")
                 lower = np.array(self.vector(box[0], f"{where}.box[0]", 3))
                 upper = np.array(self.vector(box[1], f"{where}.box[1]", 3))
                 if np.any(lower > upper):
@@ -825,245 +540,5 @@ class SceneBuilder:
         return [self.string(item, f"{key}[{i}]" if isinstance(value, list) else key, choices)
                 for i, item in enumerate(items)]
 
-    # ------------------------------------------------------------ keyframes
-
-    def keyframes(self, table: Mapping[str, Any], key: str) -> dict[str, Any]:
-        """Resolved ``times`` / ``translations`` / ``rotations`` (degrees) of a table holding them."""
-        if "times" not in table:
-            raise self.error(f"{key}.times", "is missing",
-                             "give the keyframe times in seconds, e.g. times = [0.0, 1.0]")
-        times_raw = table["times"]
-        if not isinstance(times_raw, list) or not times_raw:
-            raise self.error(f"{key}.times", f"expected a non-empty array of times, got {_show(times_raw)}",
-                             "write times = [0.0, 1.0] (seconds, increasing)")
-        times = [self.number(t, f"{key}.times[{i}]") for i, t in enumerate(times_raw)]
-        for i in range(1, len(times)):
-            if not times[i] > times[i - 1]:
-                raise self.error(f"{key}.times", f"times[{i}] = {times[i]:g} is not greater than times[{i - 1}] = "
-                                 f"{times[i - 1]:g}", "list the keyframe times in strictly increasing order")
-        zeros = [[0.0, 0.0, 0.0] for _ in times]
-        translations = self.rows(table.get("translations", zeros), f"{key}.translations", len(times), "translation")
-        rotations = self.rows(table.get("rotations", zeros), f"{key}.rotations", len(times), "rotation vector")
-        return {"times": times, "translations": translations, "rotations": rotations}
-
-    def keyframed_motion(self, keyframes: Mapping[str, Any], key: str,
-                         offset: np.ndarray | None = None) -> KeyframedMotion:
-        translations = np.asarray(keyframes["translations"], dtype=np.float64)
-        if offset is not None:
-            translations = translations + offset
-        try:
-            return KeyframedMotion(times=np.asarray(keyframes["times"], dtype=np.float64), translations=translations,
-                                   rotations=np.radians(np.asarray(keyframes["rotations"], dtype=np.float64)))
-        except InputError as exc:
-            raise self.rewrap_field(exc, key) from exc
-
-    # ------------------------------------------------------------ obstacles
-
-    def obstacle(self, raw: dict[str, Any], index: int, frame_time: float) -> tuple[Any, dict[str, Any]]:
-        key = f"obstacle[{index}]"
-        self.check_keys(raw, _OBSTACLE_KEYS, key, hints={
-            "times": "put times in the keyframes table: keyframes = { times = [...], translations = [...] }",
-            "translations": "put translations in the keyframes table",
-            "rotations": "put rotations in the keyframes table",
-            "radius": "write sphere = { radius = 0.25 }", "material": "obstacles have no material"})
-        name = self.string(raw.get("name", f"obstacle{index}"), f"{key}.name")
-        spec: dict[str, Any] = {"name": name}
-        shapes = [s for s in _OBSTACLE_SHAPES if s in raw]
-        if len(shapes) != 1:
-            problem = f"has {' and '.join(shapes)}" if shapes else "has no shape"
-            raise self.error(key, problem, "give exactly one of mesh = \"file.obj\", sphere = { radius = 0.25 }, "
-                             "box = { size = [1.0, 1.0, 0.1] } or sequence = \"body/frame_*.obj\"")
-        shape = shapes[0]
-        placement, rotation, translation, scale = self.placement(raw, key)
-        for sequence_only in ("sequence_frame_rate", "sequence_prim"):
-            if sequence_only in raw and shape != "sequence":
-                raise self.error(f"{key}.{sequence_only}", f"{sequence_only} applies to sequence obstacles only",
-                                 "remove it, or give the body as sequence = \"body.usd\" (or frame files)")
-        if shape == "sequence":
-            if "keyframes" in raw:
-                raise self.error(f"{key}.keyframes", "a mesh sequence cannot also have keyframes",
-                                 "remove keyframes (the sequence's files give the motion) or use mesh = \"file\"")
-            animation = self.animation(raw, key)
-            if animation is not None:
-                frames, faces, file_rate = animation.frames, animation.faces, animation.frame_rate
-                spec["sequence"] = animation.source
-                if "sequence_prim" in raw:
-                    spec["sequence_prim"] = raw["sequence_prim"]
-            else:
-                files, frames, faces = self.sequence(raw["sequence"], f"{key}.sequence")
-                spec["sequence"] = [str(f) for f in files]
-                file_rate = None
-            rate = file_rate
-            if "sequence_frame_rate" in raw:
-                rate = self.number(raw["sequence_frame_rate"], f"{key}.sequence_frame_rate", minimum=0.0,
-                                   example="30.0")
-            sequence_time = frame_time  # frame k of the sequence plays at scene frame k
-            if rate is not None:
-                sequence_time = 1.0 / rate
-                spec["sequence_frame_rate"] = rate
-            placed = (scale * frames) @ rotation.T + translation
-            spec.update(placement)
-            return SequenceObstacle(placed, faces, frame_time=sequence_time, name=name), spec
-        if shape == "mesh":
-            mesh_path, mesh = self.mesh(raw["mesh"], f"{key}.mesh")
-            local, faces = mesh.vertices.astype(np.float64), mesh.faces
-            spec["mesh"] = str(mesh_path)
-        elif shape == "sphere":
-            table = self.table(raw["sphere"], f"{key}.sphere", "sphere = { radius = 0.25, subdivisions = 2 }")
-            self.check_keys(table, _SPHERE_KEYS, f"{key}.sphere")
-            if "radius" not in table:
-                raise self.error(f"{key}.sphere.radius", "is missing", "write sphere = { radius = 0.25 } (metres)")
-            radius = self.number(table["radius"], f"{key}.sphere.radius", minimum=0.0, example="0.25")
-            subdivisions = self.integer(table.get("subdivisions", 2), f"{key}.sphere.subdivisions",
-                                        minimum=0, maximum=5)
-            local, faces = icosphere(radius, subdivisions)
-            local = local.astype(np.float64)
-            spec["sphere"] = {"radius": radius, "subdivisions": subdivisions}
-        else:
-            table = self.table(raw["box"], f"{key}.box", "box = { size = [1.0, 1.0, 0.1] }")
-            self.check_keys(table, _BOX_KEYS, f"{key}.box")
-            if "size" not in table:
-                raise self.error(f"{key}.box.size", "is missing", "write box = { size = [sx, sy, sz] } (metres)")
-            size = self.vector(table["size"], f"{key}.box.size", 3, minimum=0.0, example="[1.0, 1.0, 0.1]")
-            local, faces = _box(size)
-            spec["box"] = {"size": size}
-        spec.update(placement)
-        shaped = (scale * local) @ rotation.T
-        if "keyframes" in raw:
-            table = self.table(raw["keyframes"], f"{key}.keyframes",
-                               "keyframes = { times = [0.0, 1.0], translations = [[0, 0, 0], [0, 0, 0.1]] }")
-            self.check_keys(table, _KEYFRAME_KEYS, f"{key}.keyframes")
-            keyframes = self.keyframes(table, f"{key}.keyframes")
-            spec["keyframes"] = keyframes
-            motion = self.keyframed_motion(keyframes, f"{key}.keyframes", offset=translation)
-            return Obstacle(shaped, faces, motion=motion, name=name), spec
-        return Obstacle(shaped + translation, faces, name=name), spec
-
-    def animation(self, raw: Mapping[str, Any], key: str) -> Animation | None:
-        """The animation file of ``sequence = "body.usd"`` (or an NPZ with a ``frames`` key), or None when
-        the sequence is a list or pattern of per-frame mesh files."""
-        value = raw["sequence"]
-        if not isinstance(value, str) or any(c in value for c in "*?[") \
-                or Path(value).suffix.lower() not in ANIMATION_EXTENSIONS:
-            if "sequence_prim" in raw:
-                raise self.error(f"{key}.sequence_prim", "sequence_prim applies to a USD animation only",
-                                 "remove it, or give the body as sequence = \"body.usd\"")
-            return None
-        path = self.file_path(value, f"{key}.sequence")
-        if path.suffix.lower() == ".npz":
-            try:
-                with np.load(path, allow_pickle=False) as archive:
-                    if "frames" not in archive.files:
-                        return None  # one mesh file: a sequence of one frame
-            except (OSError, ValueError, EOFError):
-                return None  # the mesh loader names the problem
-        prim = None
-        if "sequence_prim" in raw:
-            prim = self.string(raw["sequence_prim"], f"{key}.sequence_prim")
-        try:
-            return load_animation(path, prim)
-        except InputError as error:
-            raise self.error(f"{key}.sequence", f"{str(path)!r}: {error.field}: {error.problem}", error.fix) from None
-
-    def sequence(self, value: Any, key: str) -> tuple[list[Path], np.ndarray, np.ndarray]:
-        """Files, (k, n, 3) float64 positions and faces of a mesh sequence (glob pattern or list of files)."""
-        if isinstance(value, str):
-            pattern = self.file_path(value, key)
-            try:
-                files = _natural_sorted(_glob(pattern))
-            except OSError as error:
-                raise self.error(key, f"the pattern {str(pattern)!r} cannot be searched ({error.strerror or error} "
-                                 f"at {error.filename})", "use a pattern that stays inside the folder of the "
-                                 "body's frames, e.g. \"body/frame_*.obj\"") from None
-            if not files:
-                raise self.error(key, f"the pattern {str(pattern)!r} matches no file",
-                                 "check the pattern; it is relative to the scene file's folder, e.g. "
-                                 "\"body/frame_*.obj\"")
-        elif isinstance(value, list) and value:
-            files = [self.file_path(item, f"{key}[{i}]") for i, item in enumerate(value)]
-        else:
-            raise self.error(key, f"expected a glob pattern or a non-empty array of files, got {_show(value)}",
-                             "write sequence = \"body/frame_*.obj\" (one mesh file per frame)")
-        frames: list[np.ndarray] = []
-        faces: np.ndarray | None = None
-        for i, file in enumerate(files):
-            where = f"{key}[{i}]" if isinstance(value, list) else key
-            _, mesh = self.mesh(str(file), where)
-            if faces is None:
-                faces = mesh.faces
-            elif mesh.vertex_count != frames[0].shape[0] or not np.array_equal(mesh.faces, faces):
-                raise self.error(where, f"{str(file)!r} (frame {i}) does not have the topology of frame 0 "
-                                 f"{str(files[0])!r} ({mesh.vertex_count} vertices / {mesh.face_count} faces vs "
-                                 f"{frames[0].shape[0]} / {faces.shape[0]})",
-                                 "export every frame with the same vertices and faces, in the same order")
-            frames.append(mesh.vertices.astype(np.float64))
-        assert faces is not None
-        return files, np.stack(frames), faces
-
-
-def _zero_area_faces(coords: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Faces whose triangle in ``coords`` (2-D or 3-D) has twice its area at most
-    ``SIM_MIN_REST_AREA_RATIO`` x its longest edge squared: the cloth model's test (``pscc.sim.model``)."""
-    corners = np.asarray(coords, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    if corners.shape[2] == 2:
-        twice_area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    else:
-        twice_area = np.linalg.norm(np.cross(e1, e2), axis=1)
-    edges = corners[:, [1, 2, 0]] - corners
-    longest_sq = np.max(np.einsum("mkd,mkd->mk", edges, edges), axis=1)
-    return np.flatnonzero(~(twice_area > SIM_MIN_REST_AREA_RATIO * longest_sq))
-
-
-def _plane_coordinates(points: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """(u, v) coordinates of points in their best-fit plane, the largest distance to it, and the size.
-
-    The plane goes through the centroid; its normal is the direction of least variance, oriented so
-    that its largest component is positive. The u axis is the x axis projected onto the plane (the
-    y axis when the plane is nearly perpendicular to x), v = normal x u. For points in a plane
-    z = const this gives u = x - mean(x), v = y - mean(y).
-    """
-    points = np.asarray(points, dtype=np.float64)
-    centred = points - points.mean(axis=0)
-    _, _, basis = np.linalg.svd(centred, full_matrices=False)
-    normal = basis[-1] if basis.shape[0] == 3 else np.array([0.0, 0.0, 1.0])
-    normal = normal / np.linalg.norm(normal)
-    if normal[int(np.argmax(np.abs(normal)))] < 0.0:
-        normal = -normal
-    for axis in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
-        u = axis - float(axis @ normal) * normal
-        if np.linalg.norm(u) > 0.5:
-            break
-    u = u / np.linalg.norm(u)
-    v = np.cross(normal, u)
-    flat = np.stack([centred @ u, centred @ v], axis=1)
-    distance = float(np.abs(centred @ normal).max()) if centred.size else 0.0
-    size = float(np.ptp(points, axis=0).max()) if points.size else 0.0
-    return flat, distance, size
-
-
-def _box(size: list[float]) -> tuple[np.ndarray, np.ndarray]:
-    """A closed box centred at the origin: 8 vertices, 12 outward (counter-clockwise) triangles."""
-    half = np.asarray(size, dtype=np.float64) / 2.0
-    corners = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)]) * half
-    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=np.int32)
-    return corners, faces
-
-
-def _glob(pattern: Path) -> list[Path]:
-    """Files matching ``pattern`` (``OSError`` when a folder on the way cannot be searched)."""
-    anchor = Path(pattern.anchor)
-    relative = str(pattern.relative_to(anchor))
-    return [p for p in anchor.glob(relative) if p.is_file()]
-
-
-def _natural_sorted(paths: list[Path]) -> list[Path]:
-    """Sorted so that ``frame_2`` comes before ``frame_10``."""
-
-    def key(path: Path) -> list[Any]:
-        return [(0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", str(path))]
-
-    return sorted(paths, key=key)
 
 
