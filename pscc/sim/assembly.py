@@ -307,6 +307,34 @@ def _contact_block(coefficients: wp.vec2, n: wp.vec3) -> wp.mat33:
 
 
 @wp.func
+def _weighted(ids: wp.vec4i, w: wp.vec4, values: wp.array(dtype=wp.vec3)) -> wp.vec3:
+    """``sum_a w_a values[ids[a]]`` (a pair's offset from its positions, its relative velocity from velocities)."""
+    return w[0] * values[ids[0]] + w[1] * values[ids[1]] + w[2] * values[ids[2]] + w[3] * values[ids[3]]
+
+
+@wp.func
+def _inverse_effective_mass(ids: wp.vec4i, w: wp.vec4, vertices: VertexArrays) -> float:
+    """``sum_a w_a^2 / m_a`` over the free vertices with mass (scripted vertices count as infinitely heavy)."""
+    total = float(0.0)
+    for a in range(4):
+        mass = vertices.mass[ids[a]]
+        if vertices.kind[ids[a]] == _FREE and mass > 0.0:
+            total = total + w[a] * w[a] / mass
+    return total
+
+
+@wp.func
+def _emit_pair(ids: wp.vec4i, w: wp.vec4, force: wp.vec3, known: wp.vec3, dt: float, kind: wp.array(dtype=wp.int32),
+               rhs: wp.array(dtype=wp.vec3)):
+    """A pair's right-hand side on its free rows: ``dt w_a force`` and the moved-over known part ``-w_a known``
+    (``known = K sum_b w_b v_ref_b``)."""
+    for a in range(4):
+        _emit_force(ids[a], w[a] * force, dt, kind, rhs)
+        if kind[ids[a]] == _FREE:
+            wp.atomic_sub(rhs, ids[a], w[a] * known)
+
+
+@wp.func
 def _assemble_contact(
     contacts: ContactArrays,
     vertices: VertexArrays,
@@ -324,16 +352,11 @@ def _assemble_contact(
     ids = contacts.vertices[c]
     w = contacts.weights[c]
     n = contacts.normals[c]
-    point = wp.vec3(0.0)
-    relative_velocity = wp.vec3(0.0)
-    inverse_mass = float(0.0)
+    point = _weighted(ids, w, positions)
+    relative_velocity = _weighted(ids, w, v_ref)
+    inverse_mass = _inverse_effective_mass(ids, w, vertices)
     friction = float(0.0)
     for a in range(4):
-        point = point + w[a] * positions[ids[a]]
-        relative_velocity = relative_velocity + w[a] * v_ref[ids[a]]
-        mass = vertices.mass[ids[a]]
-        if vertices.kind[ids[a]] == _FREE and mass > 0.0:
-            inverse_mass = inverse_mass + w[a] * w[a] / mass
         friction = friction + 0.5 * wp.abs(w[a]) * vertices.friction[ids[a]]
     rest = contacts.rest_gap
     if contacts.start_gap.shape[0] > 0:
@@ -357,11 +380,7 @@ def _assemble_contact(
     coefficient = wp.vec2(dt * dt * stiffness, dt * damping)
     coefficients[c] = coefficient
     # Free rows: dt f_a and the moved-over known part -sum_b A_ab v_ref_b = -w_a K (sum_b w_b v_ref_b).
-    known = _contact_block(coefficient, n) * relative_velocity
-    for a in range(4):
-        _emit_force(ids[a], (normal_force * w[a]) * n, dt, vertices.kind, rhs)
-        if vertices.kind[ids[a]] == _FREE:
-            wp.atomic_sub(rhs, ids[a], w[a] * known)
+    _emit_pair(ids, w, normal_force * n, _contact_block(coefficient, n) * relative_velocity, dt, vertices.kind, rhs)
 
 
 @wp.kernel
@@ -408,15 +427,8 @@ def _assemble_stitches(
     for c in range(wp.tid(), _contact_rows(stitches), lanes):
         ids = stitches.vertices[c]
         w = stitches.weights[c]
-        offset = wp.vec3(0.0)
-        relative_velocity = wp.vec3(0.0)
-        inverse_mass = float(0.0)
-        for a in range(4):
-            offset = offset + w[a] * positions[ids[a]]
-            relative_velocity = relative_velocity + w[a] * v_ref[ids[a]]
-            mass = vertices.mass[ids[a]]
-            if vertices.kind[ids[a]] == _FREE and mass > 0.0:
-                inverse_mass = inverse_mass + w[a] * w[a] / mass
+        offset = _weighted(ids, w, positions)
+        inverse_mass = _inverse_effective_mass(ids, w, vertices)
         if inverse_mass <= 0.0:
             coefficients[c] = wp.vec2(0.0)
             continue
@@ -427,11 +439,7 @@ def _assemble_stitches(
             offset = offset * (params.sewing_step / length)
         coefficient = wp.vec2(dt * dt * stiffness, dt * dt * stiffness)
         coefficients[c] = coefficient
-        known = coefficient[0] * relative_velocity
-        for a in range(4):
-            _emit_force(ids[a], (-stiffness * w[a]) * offset, dt, vertices.kind, rhs)
-            if vertices.kind[ids[a]] == _FREE:
-                wp.atomic_sub(rhs, ids[a], w[a] * known)
+        _emit_pair(ids, w, -stiffness * offset, coefficient[0] * _weighted(ids, w, v_ref), dt, vertices.kind, rhs)
 
 
 @wp.kernel

@@ -195,6 +195,22 @@ def _append_hit(
     springs.normals[slot] = contact_normal(weighted_sum(w, x0, x1, x2, x3), plane, plane)
 
 
+@wp.func
+def _row_of(r: int, vertex_face_count: int) -> wp.vec2i:
+    """(0, r) for the r-th vertex-face row, (1, r - count) for an edge-edge row (the rows of one pass)."""
+    if r >= vertex_face_count:
+        return wp.vec2i(1, r - vertex_face_count)
+    return wp.vec2i(0, r)
+
+
+@wp.func
+def _row_vertices(contacts: ContactArgs, kind_row: wp.vec2i) -> wp.vec4i:
+    """The four vertex ids of a row of :func:`_row_of`."""
+    if kind_row[0] != 0:
+        return edge_edge_vertices(contacts, kind_row[1])
+    return vertex_face_vertices(contacts, kind_row[1])
+
+
 @wp.kernel
 def _append_contacts(
     # in:
@@ -213,19 +229,13 @@ def _append_contacts(
     through :func:`_append_hit` with its closest-point weights."""
     vertex_face_count = vertex_face_rows(contacts)
     for r in range(wp.tid(), vertex_face_count + edge_edge_rows(contacts), lanes):
-        edge_edge = int(0)
-        row = r
-        ids = wp.vec4i(0, 0, 0, 0)
-        if r >= vertex_face_count:
-            edge_edge = 1
-            row = r - vertex_face_count
-            if contacts.edge_edge_toi[row] > 1.0:
-                continue
-            ids = edge_edge_vertices(contacts, row)
-        else:
-            if contacts.vertex_face_toi[row] > 1.0:
-                continue
-            ids = vertex_face_vertices(contacts, row)
+        kind_row = _row_of(r, vertex_face_count)
+        edge_edge = kind_row[0]
+        row = kind_row[1]
+        toi = contacts.vertex_face_toi[row] if edge_edge == 0 else contacts.edge_edge_toi[row]
+        if toi > 1.0:
+            continue
+        ids = _row_vertices(contacts, kind_row)
         x0 = positions[ids[0]]
         x1 = positions[ids[1]]
         x2 = positions[ids[2]]
@@ -256,15 +266,10 @@ def _test_and_append(
     spring."""
     vertex_face_count = vertex_face_rows(contacts)
     for r in range(wp.tid(), vertex_face_count + edge_edge_rows(contacts), lanes):
-        edge_edge = int(0)
-        row = r
-        ids = wp.vec4i(0, 0, 0, 0)
-        if r >= vertex_face_count:
-            edge_edge = 1
-            row = r - vertex_face_count
-            ids = edge_edge_vertices(contacts, row)
-        else:
-            ids = vertex_face_vertices(contacts, row)
+        kind_row = _row_of(r, vertex_face_count)
+        edge_edge = kind_row[0]
+        row = kind_row[1]
+        ids = _row_vertices(contacts, kind_row)
         x0 = positions[ids[0]]
         x1 = positions[ids[1]]
         x2 = positions[ids[2]]
