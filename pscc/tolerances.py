@@ -101,6 +101,11 @@ DEGENERATE_FACE_RATIO: float = 1.0e-10
 normal is noise, so its normal-cone mask is empty and no node containing it is certified.
 Dimensionless."""
 
+SEAM_GAP_RATIO: float = 0.05
+"""A sewn seam edge pair counts as interior to a normal-cone node (so the node may be certified across
+the seam) only while both stitch gaps are at most this fraction of the shorter of the two seam edges,
+at the start and, for CCD, at the end of the step (docs/bvh.md, "Sewn panels"). Dimensionless."""
+
 CONTACT_NORMAL_MIN_OFFSET: float = 1.0e-12
 """A contact's closest-point offset shorter than this gives no direction (its float32 components are
 noise); its normal is then the pair's plane normal, oriented like the offset at the start of the step.

@@ -28,6 +28,33 @@ class NodeTestArgs:
     swept: wp.int32
     margin: wp.float32
     degenerate_ratio: wp.float32
+    seam_gap_ratio: wp.float32
+
+
+@wp.func
+def _seam_pair_closed(x: wp.array(dtype=wp.vec3), a1: int, a2: int, b1: int, b2: int, ratio: float) -> bool:
+    """Whether a sewn seam edge pair (a1 a2 on one side, b1 b2 welded to them) is closed: both stitch
+    gaps are at most ``ratio`` times the shorter of the two seam edges."""
+    gap = wp.max(wp.length(x[a1] - x[b1]), wp.length(x[a2] - x[b2]))
+    return gap <= ratio * wp.min(wp.length(x[a2] - x[a1]), wp.length(x[b2] - x[b1]))
+
+
+@wp.func
+def _seams_closed(args: NodeTestArgs, node: int) -> bool:
+    """Whether every sewn seam edge pair that is interior to ``node`` is closed, at t0 (and t1 when
+    swept; a gap is convex in t, so it stays below the larger end value in between)."""
+    bvh = args.bvh
+    for s in range(bvh.seam_offsets[node], bvh.seam_offsets[node + 1]):
+        a1 = bvh.seam_vertices[4 * s]
+        a2 = bvh.seam_vertices[4 * s + 1]
+        b1 = bvh.seam_vertices[4 * s + 2]
+        b2 = bvh.seam_vertices[4 * s + 3]
+        if not _seam_pair_closed(args.positions_t0, a1, a2, b1, b2, args.seam_gap_ratio):
+            return False
+        if args.swept == 1:
+            if not _seam_pair_closed(args.positions_t1, a1, a2, b1, b2, args.seam_gap_ratio):
+                return False
+    return True
 
 
 @wp.func
@@ -37,6 +64,8 @@ def _node_passes(args: NodeTestArgs, node: int) -> bool:
     if bvh.is_leaf[node] == 1 or bvh.is_rigid[node] == 1:
         return True
     if bvh.testable[node] == 0:
+        return False
+    if not _seams_closed(args, node):
         return False
     m = args.node_mask[node]
     if nc.mask_is_empty(m):

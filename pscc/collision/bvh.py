@@ -16,7 +16,7 @@ import warp as wp
 
 from pscc._checks import INT32_MAX, as_numpy, check_object_ids
 from pscc.errors import InputError
-from pscc.mesh.mesh_data import MeshData
+from pscc.mesh.mesh_data import MeshData, check_stitches
 from pscc.mesh.topology import MeshTopology
 
 wp.set_module_options({"enable_backward": False})
@@ -43,6 +43,8 @@ class MaterialBvhArrays:
     reference_vertex: wp.array(dtype=wp.int32)
     contour_offsets: wp.array(dtype=wp.int32)
     contour_vertices: wp.array(dtype=wp.int32)
+    seam_offsets: wp.array(dtype=wp.int32)
+    seam_vertices: wp.array(dtype=wp.int32)
     face_order: wp.array(dtype=wp.int32)
     face_leaf: wp.array(dtype=wp.int32)
     level_offsets: wp.array(dtype=wp.int32)
@@ -103,6 +105,77 @@ def _face_panels(topology: MeshTopology, object_ids: np.ndarray) -> np.ndarray:
     return parent
 
 
+def _seam_matches(faces: np.ndarray, topology: MeshTopology, object_ids: np.ndarray,
+                  stitches: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Sewn seam edges: pairs of boundary half-edges whose ends are welded by vertex stitches.
+
+    A stitch ``(i, j, k, r)`` with r = 0 welds i to j (r = 1: to k); stitches with 0 < r < 1 put i
+    inside an edge and weld nothing. A boundary half-edge a -> b (its edge has one face) is matched
+    with the boundary half-edge c -> d of another face of the same object when a is welded to d and
+    b to c (opposite directions: the two faces are consistently oriented across the seam), and the
+    match is unique both ways. Anything else (a T-junction, three panels on one seam, flipped
+    panels) stays unmatched, so its edges stay on the contours.
+
+    Returns:
+        ``(partner_face, partner_corner)``, both (m, 3) int64: for the half-edge of face f that
+        starts at corner c, the face and corner of its matched half-edge, or -1.
+    """
+    m = faces.shape[0]
+    partner_face = np.full((m, 3), -1, dtype=np.int64)
+    partner_corner = np.full((m, 3), -1, dtype=np.int64)
+    if stitches is None or stitches.shape[0] == 0:
+        return partner_face, partner_corner
+    rows = np.asarray(stitches, dtype=np.float64)
+    ids = rows[:, :3].astype(np.int64)
+    at_j, at_k = rows[:, 3] == 0.0, rows[:, 3] == 1.0
+    pairs = np.concatenate([ids[at_j][:, [0, 1]], ids[at_k][:, [0, 2]]])
+    if pairs.shape[0] == 0:
+        return partner_face, partner_corner
+    welded: dict[int, set[int]] = {}
+    for i, j in pairs.tolist():
+        welded.setdefault(i, set()).add(j)
+        welded.setdefault(j, set()).add(i)
+    offsets = topology.edge_face_offsets.astype(np.int64)
+    boundary = (np.diff(offsets) == 1)[topology.face_edges.astype(np.int64)]  # (m, 3) per half-edge
+    tails = faces
+    heads = faces[:, [1, 2, 0]]
+    candidates = np.flatnonzero((boundary & np.isin(tails, pairs) & np.isin(heads, pairs)).reshape(-1))
+    slot = {(int(tails.flat[h]), int(heads.flat[h])): int(h) for h in candidates}
+    match: dict[int, int] = {}
+    for h in candidates.tolist():
+        a, b = int(tails.flat[h]), int(heads.flat[h])
+        found = [slot[(c, d)] for c in welded.get(b, ()) for d in welded.get(a, ()) if (c, d) in slot]
+        found = [g for g in found if g // 3 != h // 3 and object_ids[g // 3] == object_ids[h // 3]]
+        if len(found) == 1:
+            match[h] = found[0]
+    for h, g in match.items():
+        if match.get(g) == h:
+            partner_face.flat[h] = g // 3
+            partner_corner.flat[h] = g % 3
+    return partner_face, partner_corner
+
+
+def _sewn_components(panel_of_face: np.ndarray, partner_face: np.ndarray) -> np.ndarray:
+    """Component of each panel when panels joined by matched seam edges count as one (smallest panel)."""
+    count = int(panel_of_face.max()) + 1
+    parent = np.arange(count, dtype=np.int64)
+    sewn = partner_face.reshape(-1) >= 0
+    u = panel_of_face[np.repeat(np.arange(partner_face.shape[0]), 3)[sewn]]
+    v = panel_of_face[partner_face.reshape(-1)[sewn]]
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = int(parent[x])
+        return x
+
+    for a, b in zip(u.tolist(), v.tolist(), strict=True):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    return np.array([find(p) for p in range(count)], dtype=np.int64)
+
+
 def _face_geometry(faces: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, ...]:
     """Per-face material-space centroid, box corners and area (float64)."""
     corners = material[faces]  # (m, 3, dim)
@@ -160,24 +233,28 @@ def _split_ranges(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, ce
 
 
 def _chain_loops(node: np.ndarray, tail: np.ndarray, head: np.ndarray, vertex_count: int,
-                 node_count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 node_count: int, label: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Chain directed contour edges into loops, per node; keep the nodes made of exactly one loop.
 
     A node is kept iff every contour vertex has exactly one outgoing and one incoming contour edge
     (so the edges form disjoint cycles) and there is one cycle. The loop of a kept node starts at
     its smallest vertex id.
 
+    ``label`` (default: ``tail``) is what the loop stores for each edge: with welded seams the edges
+    are chained on welded vertex ids but each loop entry keeps its edge's own tail vertex.
+
     Returns:
-        ``(node, rank, vertex)`` of every contour vertex of the kept nodes: the vertex at loop
-        position ``rank`` of ``node``.
+        ``(node, rank, vertex)`` of every contour vertex of the kept nodes: the vertex (label) at
+        loop position ``rank`` of ``node``.
     """
+    label = tail if label is None else label
     if node.shape[0] == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty, empty
     n = np.int64(max(vertex_count, 1))
     key_tail = node * n + tail
     order = np.argsort(key_tail, kind="stable")
-    node, tail, head, key_tail = node[order], tail[order], head[order], key_tail[order]
+    node, tail, head, key_tail, label = node[order], tail[order], head[order], key_tail[order], label[order]
     count = node.shape[0]
     # successor: the edge leaving the head vertex. It is a permutation of the node's edges iff every
     # head starts an edge and no head repeats (two edges leaving one vertex force, by counting, a
@@ -191,7 +268,7 @@ def _chain_loops(node: np.ndarray, tail: np.ndarray, head: np.ndarray, vertex_co
 
     keep = ~bad[node]
     new_index = np.cumsum(keep) - 1
-    node, tail, successor = node[keep], tail[keep], new_index[successor[keep]]
+    node, label, successor = node[keep], label[keep], new_index[successor[keep]]
     count = node.shape[0]
     if count == 0:
         empty = np.zeros(0, dtype=np.int64)
@@ -212,7 +289,59 @@ def _chain_loops(node: np.ndarray, tail: np.ndarray, head: np.ndarray, vertex_co
         jump = jump[jump]
     bad[node[jump != start]] = True  # an edge not on the start's cycle: several loops
     keep = ~bad[node]
-    return node[keep], rank[keep], tail[keep]
+    return node[keep], rank[keep], label[keep]
+
+
+def _weld_in_nodes(faces: np.ndarray, level_faces: np.ndarray, face_node: np.ndarray, interior_seam: np.ndarray,
+                   seams: tuple[np.ndarray, np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Welded vertices of one depth: the ends of the interior seam pairs of each node, joined per node.
+
+    Returns None without interior seams, else ``(keys, targets, rows)``: sorted keys ``node * n + v``
+    of the welded vertices, the smallest vertex each one is welded to within that node (through the
+    node's own seam pairs only), and one row ``(node, a1, a2, b1, b2)`` per interior seam edge pair
+    (a1 welded to b1, a2 to b2), each pair listed once.
+    """
+    rows, corners = np.nonzero(interior_seam)
+    if rows.shape[0] == 0:
+        return None
+    partner_face, partner_corner = seams
+    node = face_node[rows]
+    face = level_faces[rows]
+    other, other_corner = partner_face[face, corners], partner_corner[face, corners]
+    a1, a2 = faces[face, corners], faces[face, (corners + 1) % 3]
+    b2, b1 = faces[other, other_corner], faces[other, (other_corner + 1) % 3]  # partner runs b2 -> b1
+    parent: dict[int, int] = {}
+
+    def find(x: int) -> int:
+        root = x
+        while parent.get(root, root) != root:
+            root = parent[root]
+        while parent.get(x, x) != root:
+            parent[x], x = root, parent[x]
+        return root
+
+    node2 = np.concatenate([node, node])
+    for k, p, q in zip(node2.tolist(), np.concatenate([a1, a2]).tolist(), np.concatenate([b1, b2]).tolist(),
+                       strict=True):
+        rp, rq = find(k * n + p), find(k * n + q)
+        if rp != rq:  # the root is the smallest key of the class, i.e. the smallest vertex of that node
+            parent[max(rp, rq)] = min(rp, rq)
+    keys = np.array(sorted(parent.keys() | set(parent.values())), dtype=np.int64)
+    targets = np.array([find(int(key)) % n for key in keys], dtype=np.int64)
+    once = face * 3 + corners < other * 3 + other_corner
+    seam_rows = np.stack([node, a1, a2, b1, b2], axis=1)[once]
+    return keys, targets, seam_rows
+
+
+def _welded(weld: tuple[np.ndarray, np.ndarray, np.ndarray] | None, node: np.ndarray, vertex: np.ndarray,
+            n: int) -> np.ndarray:
+    """``vertex`` with every welded vertex of its ``node`` replaced by the smallest one it is welded to."""
+    if weld is None:
+        return vertex
+    keys, targets, _ = weld
+    key = node * n + vertex
+    slot = np.minimum(np.searchsorted(keys, key), keys.shape[0] - 1)
+    return np.where(keys[slot] == key, targets[slot], vertex)
 
 
 # --- the hierarchy -----------------------------------------------------------------------------
@@ -250,6 +379,9 @@ class MaterialBvh:
     reference_vertex      (N,)        interior vertex nearest the patch centroid, or -1
     contour_offsets       (N + 1,)    CSR offsets into ``contour_vertices``
     contour_vertices      (C,)        loop v_0 .. v_{k-1} of each testable node (edge v_{k-1} v_0 implied)
+    component             (N,)        sewn component of the node's panels (one only), else -1
+    seam_offsets          (N + 1,)    CSR offsets of each node's interior sewn seam edge pairs
+    seam_vertices         (4 S,)      a1 a2 b1 b2 per pair: a1 welded to b1, a2 to b2 (docs/bvh.md)
     face_order            (m,)        permutation of the faces; every node is a range of it
     face_leaf             (m,)        leaf (or rigid node) of each face
     face_panel            (m,)        panel of each face (panels numbered in top-tree order)
@@ -294,6 +426,9 @@ class MaterialBvh:
         self.reference_vertex: np.ndarray = host["reference_vertex"]
         self.contour_offsets: np.ndarray = host["contour_offsets"]
         self.contour_vertices: np.ndarray = host["contour_vertices"]
+        self.seam_offsets: np.ndarray = host["seam_offsets"]
+        self.seam_vertices: np.ndarray = host["seam_vertices"]
+        self.component: np.ndarray = host["component"]
         self.face_order: np.ndarray = host["face_order"]
         self.face_leaf: np.ndarray = host["face_leaf"]
         self.face_panel: np.ndarray = host["face_panel"]
@@ -304,6 +439,8 @@ class MaterialBvh:
         self.arrays = MaterialBvhArrays()
         for name in _DEVICE_FIELDS:
             values = np.ascontiguousarray(host[name], dtype=np.int32)
+            if values.size == 0:  # an empty seam list: one unused entry, as Warp arrays need a buffer
+                values = np.zeros(1, dtype=np.int32)
             setattr(self.arrays, name, wp.array(values, dtype=wp.int32, device=self.device))
 
     # --- sizes ---------------------------------------------------------------------------------
@@ -370,11 +507,11 @@ class MaterialBvh:
         Allocates: yes. Capture-safe: no.
         """
         material = mesh.rest if mesh.rest is not None else mesh.vertices
-        return cls.build(mesh.faces, material, mesh.object_ids, topology, device, rigid_objects)
+        return cls.build(mesh.faces, material, mesh.object_ids, topology, device, rigid_objects, mesh.stitches)
 
     @classmethod
     def build(cls, faces: Any, material: Any, object_ids: Any, topology: MeshTopology, device: Any = None,
-              rigid_objects: Iterable[int] = frozenset()) -> MaterialBvh:
+              rigid_objects: Iterable[int] = frozenset(), stitches: Any = None) -> MaterialBvh:
         """Build the hierarchy and its contours on the host, then upload it to ``device``.
 
         Args:
@@ -386,6 +523,10 @@ class MaterialBvh:
             topology: ``MeshTopology.from_faces(faces, vertex_count)``.
             device: Warp device of the uploaded arrays.
             rigid_objects: Object ids whose faces form one unsplit node each.
+            stitches: optional (s, 4) rows ``(i, j, k, r)`` (vertex i sewn to (1 - r) x_j + r x_k). Seam
+                edges whose ends are welded by stitches with r = 0 or 1 join their panels into one sewn
+                component, and count as interior edges of the nodes holding both sides (docs/bvh.md,
+                "Sewn panels").
 
         Returns:
             The hierarchy. Host cost: O(m log m) per depth, O(m log^2 m) in all.
@@ -397,9 +538,11 @@ class MaterialBvh:
         Allocates: yes. Capture-safe: no.
         """
         tris, coords, objects, rigid = _validate(faces, material, object_ids, topology, rigid_objects)
+        rows = None if stitches is None else check_stitches(stitches, coords.shape[0], "argument")
+        seams = _seam_matches(tris, topology, objects, rows)
         geometry = _face_geometry(tris, coords)
-        host = _build_tree(geometry, objects, topology, rigid)
-        host.update(_build_contours(tris, coords, geometry, topology, host))
+        host = _build_tree(geometry, objects, topology, rigid, seams[0])
+        host.update(_build_contours(tris, coords, geometry, topology, host, seams))
         host = {name: values.astype(np.int32) if values.dtype.kind in "iu" else values
                 for name, values in host.items()}
         return cls(host, device)
@@ -440,12 +583,15 @@ def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology
 
 
 def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topology: MeshTopology,
-                rigid: frozenset[int]) -> dict[str, np.ndarray]:
+                rigid: frozenset[int], partner_face: np.ndarray) -> dict[str, np.ndarray]:
     """Top-down, level-by-level construction of the node arrays (see :class:`MaterialBvh`)."""
     centroid, lower, upper, _ = geometry
     m, dim = centroid.shape
 
     # Panels, ordered by object, then by centroid along the object's widest spread of panel centroids.
+    # Panels sewn together (matched seam edges, :func:`_seam_matches`) form a sewn component; the
+    # panels of one component are kept consecutive (ordered by the component's mean panel centroid),
+    # so the top tree joins sewn panels before anything else.
     panel_root = _face_panels(topology, object_ids)
     panel_min_face, panel_of_face = np.unique(panel_root, return_inverse=True)
     panel_count = panel_min_face.shape[0]
@@ -459,7 +605,15 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
     np.maximum.at(spread_hi, panel_object, panel_center)
     axis = np.argmax(spread_hi - spread_lo, axis=1)[panel_object]
     keys = [panel_min_face] + [panel_center[:, k] for k in range(dim - 1, -1, -1)]
-    panel_sequence = np.lexsort((*keys, panel_center[np.arange(panel_count), axis], panel_object))
+    along = panel_center[np.arange(panel_count), axis]
+    panel_component = np.arange(panel_count, dtype=np.int64)
+    if (partner_face >= 0).any():
+        panel_component = _sewn_components(panel_of_face, partner_face)
+        component_along = (np.bincount(panel_component, weights=along, minlength=panel_count)
+                           / np.maximum(np.bincount(panel_component, minlength=panel_count), 1))
+        keys += [along, panel_component]
+        along = component_along[panel_component]
+    panel_sequence = np.lexsort((*keys, along, panel_object))
     panel_rank = np.empty(panel_count, dtype=np.int64)
     panel_rank[panel_sequence] = np.arange(panel_count)
     face_panel = panel_rank[panel_of_face]
@@ -525,6 +679,11 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
     positions, which = _range_positions(begin[is_leaf], end[is_leaf])
     face_leaf[face_order[positions]] = ids[is_leaf][which]
     plo_all, phi_all = gather("plo"), gather("phi")
+    # Sewn component of each node: its panels' one component (consecutive panels), else -1.
+    sequence_component = panel_component[panel_sequence]
+    first_component = sequence_component[plo_all]
+    component = np.where(first_component == sequence_component[np.maximum(phi_all - 1, plo_all)],
+                         first_component, -1)
     # One root per distinct object id, by ascending id (a table of max id + 1 rows would take 16 GiB
     # for an id of 2**31 - 1; ids need not be contiguous).
     root_order = np.argsort(levels[0]["object"], kind="stable")
@@ -534,6 +693,7 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
         "depth": np.repeat(np.arange(len(levels)), np.diff(level_offsets)),
         "face_begin": begin, "face_end": end, "is_leaf": is_leaf, "is_rigid": gather("rigid"),
         "object_id": gather("object"), "panel": np.where(phi_all - plo_all == 1, plo_all, -1),
+        "component": np.where(gather("rigid"), -1, component),
         "face_order": face_order, "face_leaf": face_leaf, "face_panel": face_panel,
         "level_offsets": level_offsets, "level_nodes": ids,
         "roots": levels[0]["id"][root_order], "object_values": levels[0]["object"][root_order],
@@ -541,14 +701,22 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
 
 
 def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.ndarray, ...],
-                    topology: MeshTopology, host: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+                    topology: MeshTopology, host: dict[str, np.ndarray],
+                    seams: tuple[np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
     """Contour loops, ``testable`` and ``reference_vertex`` of every node, one depth at a time.
 
     At one depth the nodes cover disjoint face ranges. A half-edge of face f is on the contour of
     f's node iff its edge has no other face, or its one other face lies in another node; edges with
     3+ faces make a node non-testable, so they need no counting. Loops are chained per depth by
     :func:`_chain_loops`; total work O(m log m) per depth.
+
+    Sewn seams (``seams`` = :func:`_seam_matches`): a matched seam half-edge whose partner face is in
+    the same node is interior, like a shared edge, and the two stitched ends of such a pair count as
+    one vertex when the loop is chained (welded within that node only; the loop keeps each edge's
+    own tail vertex). Those pairs are listed per node in ``seam_offsets`` / ``seam_vertices``
+    (a1, a2, b1, b2: a1 welded to b1, a2 to b2) for the gap check of the node test.
     """
+    partner_face, partner_corner = seams
     m = faces.shape[0]
     n = material.shape[0]
     node_count = host["left"].shape[0]
@@ -563,8 +731,9 @@ def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.
     non_manifold = np.concatenate([[0], np.cumsum((degree >= 3).any(axis=1)[face_order])])
     centroid, _, _, area = geometry
 
-    candidate = (~host["is_leaf"] & ~host["is_rigid"] & (host["panel"] >= 0)
+    candidate = (~host["is_leaf"] & ~host["is_rigid"] & ((host["panel"] >= 0) | (host["component"] >= 0))
                  & (non_manifold[end] == non_manifold[begin]))
+    seam_pieces: list[np.ndarray] = []
     contour_length = np.where(host["is_leaf"] & ~host["is_rigid"], 3, 0).astype(np.int64)
     reference_vertex = np.full(node_count, -1, dtype=np.int64)
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -585,12 +754,20 @@ def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.
         node_of_face[level_faces] = face_node
         others = other_face[level_faces]
         on_contour = (others < 0) | (node_of_face[np.maximum(others, 0)] != face_node[:, None])
+        sewn = partner_face[level_faces]
+        interior_seam = (sewn >= 0) & (node_of_face[np.maximum(sewn, 0)] == face_node[:, None])
         node_of_face[level_faces] = -1
+        on_contour &= ~interior_seam
         tails = faces[level_faces]
         heads = tails[:, [1, 2, 0]]
         half_node = np.broadcast_to(face_node[:, None], tails.shape)
-        loop_node, rank, vertex = _chain_loops(half_node[on_contour], tails[on_contour], heads[on_contour], n,
-                                               node_count)
+        weld = _weld_in_nodes(faces, level_faces, face_node, interior_seam, seams, n)
+        if weld is not None:
+            seam_pieces.append(weld[2])
+        chain_tail = _welded(weld, half_node[on_contour], tails[on_contour], n)
+        chain_head = _welded(weld, half_node[on_contour], heads[on_contour], n)
+        loop_node, rank, vertex = _chain_loops(half_node[on_contour], chain_tail, chain_head, n, node_count,
+                                               tails[on_contour])
         if loop_node.shape[0] == 0:
             continue
         pieces.append((loop_node, rank, vertex))
@@ -612,8 +789,8 @@ def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.
         slot[good_nodes] = np.arange(good_nodes.shape[0])
         corner_vertex = faces[level_faces].reshape(-1)
         corner_node = np.repeat(face_node, 3)
-        contour_keys = np.sort(loop_node * n + vertex)
-        corner_keys = corner_node * n + corner_vertex
+        contour_keys = np.sort(loop_node * n + _welded(weld, loop_node, vertex, n))
+        corner_keys = corner_node * n + _welded(weld, corner_node, corner_vertex, n)
         found = contour_keys[np.minimum(np.searchsorted(contour_keys, corner_keys), contour_keys.shape[0] - 1)]
         interior = found != corner_keys
         corner_vertex, corner_node = corner_vertex[interior], corner_node[interior]
@@ -632,6 +809,11 @@ def _build_contours(faces: np.ndarray, material: np.ndarray, geometry: tuple[np.
     contour_vertices = np.empty(int(contour_offsets[-1]), dtype=np.int64)
     for loop_node, rank, vertex in pieces:
         contour_vertices[contour_offsets[loop_node] + rank] = vertex
+    seam_rows = np.concatenate(seam_pieces) if seam_pieces else np.zeros((0, 5), dtype=np.int64)
+    seam_rows = seam_rows[np.argsort(seam_rows[:, 0], kind="stable")]
+    seam_offsets = np.zeros(node_count + 1, dtype=np.int64)
+    np.cumsum(np.bincount(seam_rows[:, 0], minlength=node_count), out=seam_offsets[1:])
     return {"testable": contour_length > 0, "reference_vertex": reference_vertex,
-            "contour_offsets": contour_offsets, "contour_vertices": contour_vertices}
+            "contour_offsets": contour_offsets, "contour_vertices": contour_vertices,
+            "seam_offsets": seam_offsets, "seam_vertices": seam_rows[:, 1:].reshape(-1)}
 

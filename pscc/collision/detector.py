@@ -217,7 +217,7 @@ class CollisionDetector:
         if self.method == "pscc":
             material = mesh.rest if mesh.rest is not None else mesh.vertices
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
-                                         self._rigid_objects)
+                                         self._rigid_objects, self._stitches)
             self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)
             self.front.lend_scratch(self._front_scratch_source())
 

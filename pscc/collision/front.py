@@ -141,6 +141,7 @@ class NormalConeFront:
         self.args.node_normal = self.node_normal
         self.args.margin = tolerances.NORMAL_CONE_MARGIN
         self.args.degenerate_ratio = tolerances.DEGENERATE_FACE_RATIO
+        self.args.seam_gap_ratio = tolerances.SEAM_GAP_RATIO
 
     # --- lent memory ---------------------------------------------------------------------------
 

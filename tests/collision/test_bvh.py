@@ -443,11 +443,13 @@ def test_device_arrays(device: str) -> None:
     total = 0
     for name in ("left", "right", "parent", "depth", "face_begin", "face_end", "is_leaf", "is_rigid", "object_id",
                  "testable", "reference_vertex", "contour_offsets", "contour_vertices", "face_order", "face_leaf",
-                 "level_offsets", "level_nodes"):
+                 "level_offsets", "level_nodes", "seam_offsets"):
         array = getattr(bvh.arrays, name)
         assert array.device == bvh.device and array.dtype == wp.int32
         assert np.array_equal(array.numpy(), getattr(bvh, name).astype(np.int32)), name
         total += array.capacity
+    assert bvh.seam_vertices.size == 0 and bvh.arrays.seam_vertices.shape == (1,)  # no stitches: one unused entry
+    total += bvh.arrays.seam_vertices.capacity
     assert bvh.device_bytes == total > 0
 
 
