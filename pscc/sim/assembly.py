@@ -443,6 +443,33 @@ def _assemble_stitches(
 
 
 @wp.kernel
+def _add_untangle_push(
+    # in:
+    vertices: VertexArrays,
+    velocities: wp.array(dtype=wp.vec3),
+    untangle: wp.array(dtype=wp.vec3),
+    params: StepParams,
+    # out:
+    rhs: wp.array(dtype=wp.vec3),
+):
+    """One thread per vertex: the momentum that brings a free vertex's velocity along its untangle velocity
+    u, with this step's gravity, up to |u| (a change of at most |u| + dt |g| along u, never braking;
+    :mod:`pscc.sim.untangle`). The cloth's own forces still resist it: a bounded push, not a prescription."""
+    i = wp.tid()
+    if vertices.kind[i] != _FREE:
+        return
+    target = untangle[i]
+    speed = wp.length(target)
+    if speed == 0.0:
+        return
+    direction = target / speed
+    fall = params.dt * params.gravity
+    deficit = wp.min(speed - wp.dot(direction, velocities[i] + fall), speed + wp.length(fall))
+    if deficit > 0.0:
+        wp.atomic_add(rhs, i, (vertices.mass[i] * deficit) * direction)
+
+
+@wp.kernel
 def _tick(dt: float, clock: wp.array(dtype=float)):
     """One thread: clock += dt."""
     clock[0] = clock[0] + dt
@@ -614,6 +641,10 @@ class ImplicitSystem:
             view.gap_rate = 0.0
             self._stitches = view
         self.reference_velocities = wp.zeros(n, dtype=wp.vec3, device=self.device)
+        self.untangle_velocity: wp.array | None = None
+        """(n,) vec3 per-vertex untangle velocity [m/s] (:mod:`pscc.sim.untangle`), or None (no push, no
+        launch). :meth:`assemble` adds the momentum that brings each free vertex's velocity along it up to
+        its length. Setting or clearing it changes the launches: record graphs again."""
 
     def set_start_gaps(self, gaps: np.ndarray | None, rate: float) -> None:
         """Ease apart surfaces that start closer than the thickness: a contact spring's rest gap is
@@ -680,6 +711,9 @@ class ImplicitSystem:
             wp.launch(_assemble_hinges, dim=model.hinge_count, device=self.device,
                       inputs=[model.hinges, model.vertices.kind, positions, self.reference_velocities, params],
                       outputs=[self._matrix_view, self.rhs])
+        if self.untangle_velocity is not None:
+            wp.launch(_add_untangle_push, dim=n, device=self.device,
+                      inputs=[model.vertices, velocities, self.untangle_velocity, params], outputs=[self.rhs])
         if self._stitches is not None:
             lanes = row_lanes(self.device, self.model.stitch_count)
             wp.launch(_assemble_stitches, dim=lanes, device=self.device,

@@ -43,9 +43,14 @@ class ContactConfig:
     """Run the independent intersection check (:class:`pscc.collision.intersection.IntersectionCheck`)
     on every step's end state and reject the step when it finds a crossing."""
     allow_initial_intersections: bool = False
-    """Start even when the initial state already intersects (otherwise an error names the pairs). This skips
-    the refusal and nothing else: the response keeps crossing features from crossing further but cannot
-    pull them apart, so crossing surfaces that move usually make the first steps fail (docs/simulator.md)."""
+    """Start even when the initial state already intersects (otherwise an error names the pairs). The crossing
+    pairs are then exempt from collision handling until they come apart, and the side of each crossing that
+    passed through is pushed back at ``untangle_speed`` (:meth:`pscc.sim.solver.ClothSolver.update_tangles`,
+    docs/simulator.md); new crossings are refused as always."""
+    untangle_speed: float = 0.1
+    """With ``allow_initial_intersections``: the speed [m/s] at which the side of a crossing that passed
+    through is pushed back (:mod:`pscc.sim.untangle`, once per frame while crossings remain); 0 switches
+    the push off (only the cloth's own forces then take crossings apart)."""
 
     def validate(self) -> ContactConfig:
         """Check every field; return ``self``.
@@ -66,6 +71,10 @@ class ContactConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise InputError(owner, name, f"{value!r} is not an integer >= 0", f"set {name} to an integer >= 0")
+        speed = self.untangle_speed
+        if isinstance(speed, bool) or not isinstance(speed, int | float) or not 0.0 <= float(speed) <= 1e3:
+            raise InputError(owner, "untangle_speed", f"{speed!r} is not a speed in [0, 1000] m/s",
+                             "use a value such as 0.1, or 0 to switch the push off")
         if self.max_response_rounds < 1:
             raise InputError(owner, "max_response_rounds", "0 rounds cannot resolve anything", "use at least 1")
         return self

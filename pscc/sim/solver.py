@@ -62,6 +62,7 @@ from pscc.sim.obstacles import step_map
 from pscc.sim.proximity import ProximityContacts
 from pscc.sim.scene import Scene
 from pscc.sim.state import ClothState
+from pscc.sim.untangle import Untangler
 from pscc.tolerances import MAX_COORDINATE
 
 wp.set_module_options({"enable_backward": False})
@@ -259,13 +260,20 @@ class ClothSolver:
                              "separate the surfaces in the input; to start anyway set allow_initial_intersections "
                              "= true under [contact] in the scene file (ContactConfig(allow_initial_intersections"
                              "=True) in Python), which lets crossing surfaces start, exempt from collision handling "
-                             "until the cloth's own forces take them apart")
+                             "until they come apart, the side that passed through pushed back")
         self._untangle_check: IntersectionCheck | None = None
+        self.untangler: Untangler | None = None
+        """The global intersection analysis that pushes crossing surfaces apart (:mod:`pscc.sim.untangle`), while
+        crossings remain and ``contact.untangle_speed > 0``; else ``None``."""
         self.intersecting_pairs = int(initial.shape[0])
         """Edge-face crossings (involving the cloth) left from a tangled start (:meth:`update_tangles`)."""
         if initial.shape[0]:
             self._untangle_check = IntersectionCheck(self.collision_faces, n, self.device)
+            if self.contact.untangle_speed > 0.0:
+                self.untangler = Untangler(shared.edges, shared.faces, masses, free, self.contact.untangle_speed,
+                                           self.device)
             self._join_crossings(initial)
+            self._push_apart(vertices, initial)
         self.start_contacts = self._ease_start_contacts(vertices)
         """Cloth vertices that start closer than the thickness to another surface (eased apart)."""
 
@@ -280,8 +288,10 @@ class ClothSolver:
         forces (stretch and bending towards its rest shape) can take them apart. After every frame this
         method counts the crossings that remain with a check that exempts nothing and narrows the exempt
         pairs to them; at 0 the exemption ends and only the stitches stay. New crossings are still refused
-        (the intersection check flags every crossing outside the exempt pairs). Nothing pushes crossing
-        layers apart beyond their own forces yet.
+        (the intersection check flags every crossing outside the exempt pairs). With
+        ``contact.untangle_speed > 0`` a global intersection analysis (:class:`pscc.sim.untangle.Untangler`)
+        then finds the side of each crossing that passed through, and the next frame's steps push it back
+        (:attr:`pscc.sim.assembly.ImplicitSystem.untangle_velocity`); the push ends with the crossings.
 
         Sync point (reads the positions) while crossings remain; nothing once untangled.
 
@@ -306,7 +316,22 @@ class ClothSolver:
         if self.intersecting_pairs == 0:
             self._untangle_check = None
         self._join_crossings(crossings)
+        self._push_apart(state.positions, crossings)
         return self.intersecting_pairs
+
+    def _push_apart(self, positions: wp.array | np.ndarray, crossings: np.ndarray) -> None:
+        """Set the integrator's untangle velocity from ``crossings`` (:class:`pscc.sim.untangle.Untangler`), or
+        clear it (no crossings, or no untangler). The caller records graphs again (:meth:`_join_crossings`)."""
+        system = self.integrator.system
+        if self.untangler is None or crossings.shape[0] == 0:
+            system.untangle_velocity = None
+            if crossings.shape[0] == 0:
+                self.untangler = None
+            return
+        if not isinstance(positions, wp.array):
+            positions = wp.array(np.asarray(positions, np.float32), dtype=wp.vec3, device=self.device)
+        pushed = self.untangler.analyse(positions, crossings)
+        system.untangle_velocity = self.untangler.velocity if pushed else None
 
     def _stitch_pairs(self) -> np.ndarray:
         rows = np.asarray(self.scene.stitches, dtype=np.int64).reshape(-1, 4)[:, :3]
@@ -763,9 +788,9 @@ class ClothSolver:
                 if self.initial_crossings:
                     fix = (f"the initial state has {self.initial_crossings} edge-face crossings, let through by "
                            f"allow_initial_intersections = true ({self.intersecting_pairs} still crossing); their "
-                           "pairs are exempt from collision handling until they come apart, but nothing pushes "
-                           "them apart beyond the cloth's own forces, and the features around them may still "
-                           "collide like this. Fix: separate the surfaces in the input")
+                           "pairs are exempt from collision handling until they come apart, and the side that "
+                           "passed through is pushed back (untangle_speed under [contact]), but the features "
+                           "around them may still collide like this. Fix: separate the surfaces in the input")
                 else:
                     fix = ("Fix: use a smaller time step (more steps_per_frame), allow more max_step_halvings or "
                            "max_response_rounds under [contact], or check the scene for surfaces squeezed "
