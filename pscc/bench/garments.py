@@ -1,10 +1,13 @@
-"""Sewn garments: the example skirt (``examples/garment``) at its shipped size and at about 20K triangles.
+"""Sewn garments: the example skirt (``examples/garment``) and the garment scenes on the skinned mannequin.
 
-Each case writes the skirt with ``examples/garment/make_skirt.py`` (panels cut into more cells for the
-larger case), loads ``skirt.toml`` and simulates its frames on the device path. Every frame is checked
-by ipctk with the stitched pairs left out (:func:`pscc.bench.oracle.crossings`), and the seams' largest
-gap is measured from frame 2 on, in thicknesses (the issue-13 bound is 2). Seconds per frame, halved
-steps, fallbacks and the simulator's memory are reported.
+Each skirt case writes the skirt with ``examples/garment/make_skirt.py`` (panels cut into more cells for
+the larger case), loads ``skirt.toml`` and simulates its frames on the device path. Each scene case builds
+``kungfu``, ``falling`` or ``dance`` (:mod:`pscc.scenes.garments`: pattern panels sewn around the skinned
+mannequin) at about 20K cloth triangles and simulates its whole animation. Every frame is checked by
+ipctk with the stitched pairs left out (:func:`pscc.bench.oracle.crossings`; only crossings that involve
+the cloth count: a skinned body may fold into itself at a bent knee), and the seams' largest gap is
+measured from frame 2 on, in thicknesses (the issue-13 bound is 2). Seconds per frame, halved steps,
+fallbacks and the simulator's memory are reported.
 """
 
 from __future__ import annotations
@@ -20,18 +23,25 @@ from typing import Any
 
 import numpy as np
 
-from pscc.bench.oracle import crossings
+from pscc.bench.oracle import cloth_crossings
 from pscc.scenes.scene_file import load_scene_file
+from pscc.sim.contact_config import ContactConfig
+from pscc.sim.scene import Scene
 from pscc.sim.simulation import Simulation, seam_gap
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "garment"
 """The example garment's folder (the bench runs from a checkout)."""
 
-CASES: list[tuple[tuple[int, int], int]] = [((16, 12), 45), ((100, 50), 45)]
-"""(cells per panel along the width and the height, frames): the shipped skirt (768 triangles) and one of
-20,000 triangles, each over the example's 45 frames (1.5 s)."""
+Case = tuple[tuple[int, int], int] | tuple[str, int, int]
+"""A skirt case ``((cells along the width, cells along the height), frames)`` or a scene case
+``(scene name, cloth triangles, frames)``."""
 
-QUICK_CASES: list[tuple[tuple[int, int], int]] = [((16, 12), 6)]
+CASES: list[Case] = [((16, 12), 45), ((100, 50), 45), ("kungfu", 20_000, 85), ("falling", 20_000, 48),
+                     ("dance", 20_000, 72)]
+"""The shipped skirt (768 triangles) and one of 20,000 triangles, each over the example's 45 frames (1.5 s);
+the three garment scenes at 20K cloth triangles over their whole animations."""
+
+QUICK_CASES: list[Case] = [((16, 12), 6), ("dance", 5_000, 4)]
 """The cases of ``--garments quick``."""
 
 
@@ -44,18 +54,37 @@ def _generator() -> Any:
     return module
 
 
-def run_case(cells: tuple[int, int], frames: int, device: str,
-             progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
-    """Simulate one skirt (module docstring) and return its row."""
-    row: dict[str, Any] = {"cells": list(cells), "frames": frames, "error": None}
+def _skirt(cells: tuple[int, int]) -> tuple[Scene, ContactConfig]:
+    """The example skirt cut into ``cells`` per panel."""
     with tempfile.TemporaryDirectory() as folder:
         _generator().main(Path(folder), cells)
         shutil.copy(EXAMPLE / "skirt.toml", Path(folder) / "skirt.toml")
         scene, contact, _ = load_scene_file(Path(folder) / "skirt.toml")
+    return scene, contact
+
+
+def _garment_scene(name: str, triangles: int) -> tuple[Scene, ContactConfig]:
+    """A garment scene at about ``triangles`` cloth triangles."""
+    from pscc.scenes.paper import PAPER_SCENES, PAPER_TRIANGLES
+
+    return PAPER_SCENES[name](triangles / PAPER_TRIANGLES[name]), ContactConfig()
+
+
+def run_case(case: Case, device: str, progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
+    """Simulate one skirt or garment scene (module docstring) and return its row."""
+    if isinstance(case[0], str):
+        name, triangles, frames = case  # type: ignore[misc]
+        row: dict[str, Any] = {"garment": name, "frames": frames, "error": None}
+        scene, contact = _garment_scene(str(name), int(triangles))
+    else:
+        cells, frames = case  # type: ignore[misc]
+        row = {"garment": "skirt example", "cells": list(cells), "frames": frames, "error": None}
+        scene, contact = _skirt(cells)
     thickness = float(scene.material[0].thickness if isinstance(scene.material, list) else scene.material.thickness)
     row["triangles"] = int(scene.faces.shape[0])
     row["stitches"] = int(scene.stitches.shape[0])
     stitches = scene.stitches
+    cloth_vertices, cloth_faces = int(scene.vertices.shape[0]), int(scene.faces.shape[0])
     seconds: list[float] = []
     gaps: list[float] = []
     crossing_frames = halvings = fallbacks = 0
@@ -73,8 +102,8 @@ def run_case(cells: tuple[int, int], frames: int, device: str,
                 raise FloatingPointError(f"frame {frame} holds NaN or Inf")
             if frame >= 2:
                 gaps.append(seam_gap(x, stitches))
-            crossing_frames += int(crossings(x, faces, stitches).shape[0] > 0)
-            progress(f"garment {row['triangles']}: frame {frame}/{frames} {seconds[-1]:.2f} s")
+            crossing_frames += int(cloth_crossings(x, faces, cloth_vertices, cloth_faces, stitches).shape[0] > 0)
+            progress(f"{row['garment']} {row['triangles']}: frame {frame}/{frames} {seconds[-1]:.2f} s")
         row["bytes_per_triangle"] = sim.solver.device_bytes()["total"] / row["triangles"]
     except Exception as exc:  # SimulationError and friends: reported in the table
         row["error"] = f"{type(exc).__name__}: {exc}"
@@ -88,37 +117,41 @@ def run_case(cells: tuple[int, int], frames: int, device: str,
     return row
 
 
-def run(cases: list[tuple[tuple[int, int], int]], device: str,
-        progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
+def run(cases: list[Case], device: str, progress: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
     """Every case; returns the rows and the section's wall time."""
     started = time.perf_counter()
-    rows = [run_case(cells, frames, device, progress) for cells, frames in cases]
+    rows = [run_case(case, device, progress) for case in cases]
     return {"rows": rows, "seconds": time.perf_counter() - started, "device": device}
 
 
 def report(results: dict[str, Any]) -> list[str]:
     """Markdown lines of the section."""
     lines = [
-        "## Sewn garments: the example skirt",
+        "## Sewn garments: the example skirt and the garment scenes",
         "",
         f"Device: **{results['device']}**. The skirt of `examples/garment` (two panels cut from their UV pattern, "
         "sewn at both sides by OBJ stitch lines, hanging from its waistband around a cylinder body) at its shipped "
-        "size and with its panels cut into more cells, over the example's frames on the device path. Every frame is "
-        "checked by ipctk with the stitched pairs left out (`pscc.bench.oracle.crossings`); the seam gap is the "
-        "largest distance of a sewn vertex from its seam point from frame 2 on, in thicknesses (issue 13: at most "
-        "2). Seconds per frame leave out the first frame (kernels load, buffers grow).",
+        "size and with its panels cut into more cells, over the example's frames; and the garment scenes "
+        "`kungfu`, `falling` and `dance` (pattern panels sewn at their seams, anchored at their top edges, on the "
+        "skinned mannequin: docs/scenes.md) at about 20K cloth triangles over their whole animations; all on the "
+        "device path. Every frame is checked by ipctk with the stitched pairs left out "
+        "(`pscc.bench.oracle.crossings`; crossings that involve the cloth: the skinned body itself may fold at a "
+        "bent knee); the seam gap is the largest distance of a sewn vertex from its seam point from frame 2 on, in "
+        "thicknesses (issue 13: at most 2). Seconds per frame leave out the first frame (kernels load, buffers "
+        "grow).",
         "",
-        "| triangles | stitches | frames | s/frame | first frame s | worst seam gap (h) | frames with crossings "
-        "| halved steps | fallbacks | memory B/triangle |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| garment | triangles | stitches | frames | s/frame | first frame s | worst seam gap (h) "
+        "| frames with crossings | halved steps | fallbacks | memory B/triangle |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["rows"]:
         if r["error"]:
-            lines.append(f"| {r.get('triangles', '')} | {r.get('stitches', '')} | {r['frames']} | error: {r['error']} "
-                         "| | | | | | |")
+            lines.append(f"| {r.get('garment', '')} | {r.get('triangles', '')} | {r.get('stitches', '')} | "
+                         f"{r['frames']} | error: {r['error']} | | | | | | |")
             continue
         gap = "" if r["worst_seam_gap_thicknesses"] is None else f"{r['worst_seam_gap_thicknesses']:.2f}"
-        lines.append(f"| {r['triangles']:,} | {r['stitches']} | {r['frames']} | {r['seconds_per_frame']:.3f} | "
+        lines.append(f"| {r.get('garment', 'skirt example')} | {r['triangles']:,} | {r['stitches']} | {r['frames']} | "
+                     f"{r['seconds_per_frame']:.3f} | "
                      f"{r['first_frame_seconds']:.2f} | {gap} | {r['crossing_frames']} of {r['frames']} | "
                      f"{r['halvings']} | {r['fallbacks']} | {r['bytes_per_triangle']:,.0f} |")
     lines += ["", f"Runtime of this section: {results['seconds']:.0f} s.", ""]

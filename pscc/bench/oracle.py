@@ -50,3 +50,14 @@ def crossings(positions: np.ndarray, faces: np.ndarray, stitches: np.ndarray | N
         if ipctk.is_edge_intersecting_triangle(x[a], x[b], x[face[0]], x[face[1]], x[face[2]]):
             found.append((min(a, b), max(a, b), int(candidate.face_id)))
     return np.array(sorted(found), dtype=np.int64).reshape(-1, 3)
+
+
+def cloth_crossings(positions: np.ndarray, faces: np.ndarray, cloth_vertices: int, cloth_faces: int,
+                    stitches: np.ndarray | None = None) -> np.ndarray:
+    """The :func:`crossings` that involve the cloth: its edges through any face, any edge through its faces.
+
+    The cloth's vertices and faces come first in ``positions`` and ``faces``; the rest is obstacles, which may
+    cross each other or themselves (a skinned body folds into itself at a bent knee) without harm.
+    """
+    found = crossings(positions, faces, stitches)
+    return found[(found[:, 0] < cloth_vertices) | (found[:, 2] < cloth_faces)]

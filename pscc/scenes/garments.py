@@ -1,22 +1,23 @@
-"""The paper's garment benchmarks on a procedural, articulated body: ``kungfu``, ``falling``, ``dance``.
+"""The paper's garment benchmarks on a skinned mannequin: ``kungfu``, ``falling``, ``dance``.
 
 The paper's Andy (kung-fu, 127K triangles), Falling (172K) and Bishop (swing dance, 124K) use
 artist-made garments and motion-captured characters that are not public. These are procedural
 stand-ins with the same cloth resolution and the same kind of collision work (several garments,
-several pieces each, layered, on a body moving fast): the body is
-:func:`pscc.scenes.body.humanoid` (11 rigid parts, forward kinematics) and every garment piece is
-an open tube or frustum around it.
+several panels each, layered, on a body moving fast). The body is the skeleton and motions of
+:func:`pscc.scenes.body.humanoid` dressed as one smooth, closed, skinned surface
+(:func:`pscc.scenes.mannequin.mannequin`).
 
-**Garment pieces** (:class:`TubePiece`): the cross-section is a stadium (a circle when its
-half-length is 0) scaled linearly along the piece's axis (a generalised cone; a cylinder when the
-scale is constant). The tube is cut open along one line (an opening at least one cell wide: a seam
-slit, or a wide front opening for vests and robes) and its rest (material) coordinates are its
-exact development into the plane (arc length around and length along for a cylinder, polar
-coordinates about the apex for a cone), so each piece starts at rest with zero strain. Pieces are
-not stitched to each other: sleeves and legs are separate tubes. Each piece's first row is
-**anchored** to one body part (a :class:`pscc.sim.obstacles.Handle` moving rigidly with the part):
-it stands in for the shoulder seams, waistbands and cuffs that hold real garments on a body and
-that open tubes lack. All pieces start at least 1.2 cm from the body and 5 mm from each other.
+**Garments are sewn from patterns** (:mod:`pscc.scenes.patterns`). Each garment piece
+(:class:`GarmentPiece`) is a tube of cloth around a body part (torso, pelvis, a leg, an arm) cut
+into flat pattern panels: front and back panels sewn at the side seams (shirt, robe, vest, skirt),
+front and back leg panels sewn at the inseam and outseam (trousers), one sleeve panel sewn into a
+tube at its underarm seam; a vest's, robe's or bolero's front is two panels left open between them.
+Each panel's rest shape is its flat pattern (the exact development of the cone it is wrapped on), so
+it starts unstrained; the seams start closed, vertex on vertex, and are stitches of the scene (stiff
+zero-length springs and hard constraints: see docs/simulator.md). Each panel's top edge is
+**anchored** to one body part (a :class:`pscc.sim.obstacles.Handle` moving rigidly with the part's
+joint): it stands in for the waistbands, collars and shoulder seams that hold real garments on a
+body. All pieces start at least 1 cm from the body and 5 mm from each other.
 
 Units: metres, seconds. See ``docs/scenes.md`` for every parameter and why it was chosen.
 """
@@ -31,6 +32,8 @@ import numpy as np
 
 from pscc.errors import InputError
 from pscc.scenes.body import Body, EasedMotion, arm_direction, elbow_axis, humanoid, spin
+from pscc.scenes.mannequin import mannequin
+from pscc.scenes.patterns import Panel, Wrap, mesh_panel, seam_stitches
 from pscc.sim.config import ClothMaterial, SolverConfig
 from pscc.sim.obstacles import Handle
 from pscc.sim.scene import Scene
@@ -39,162 +42,149 @@ from pscc.sim.scene import Scene
 
 
 @dataclass(frozen=True)
-class TubePiece:
-    """One garment piece: an open generalised cone around an axis.
+class GarmentPiece:
+    """One part of a garment: a tube of cloth around a body part, sewn from pattern panels.
 
-    The cross-section at the axis point ``start`` is a stadium: the points within ``radius`` of a
-    segment of half-length ``half_length`` along ``long_axis`` (a circle when the half-length is 0).
-    Along the axis it scales linearly to ``end_scale`` times that at ``end``. The tube is open along
-    a gap of ``opening`` metres (at least one cell) centred in the direction ``opening_toward``.
+    The tube lies on ``wrap`` between the axis fractions ``top_f`` and ``bottom_f``. It is cut into
+    panels at ``seams`` (3-D directions from the axis: each names the arc position farthest along
+    it) and, when ``opening`` > 0, left open over that width [m] around ``opening_toward`` (the front
+    of a vest or robe). Consecutive panels are sewn along their shared seam line; a tube with one
+    seam and no opening is a single panel sewn to itself (a sleeve). The panels' top edges are
+    anchored to the body part ``anchor``.
 
     Attributes:
-        name: label of the piece.
-        start: (3,) axis point of the first row [m].
-        end: (3,) axis point of the last row [m].
-        half_length: stadium half-length at ``start`` [m] (0 for a circle).
-        radius: stadium radius at ``start`` [m].
-        end_scale: cross-section scale at ``end`` relative to ``start`` (> 0; 1 = cylinder).
-        long_axis: direction of the stadium's segment (projected perpendicular to the axis).
-        opening_toward: direction from the axis to the middle of the opening.
-        opening: width of the opening at ``start`` [m]; widened to one cell if narrower.
-        anchor: body part that carries the first row (``None``: the piece is free).
+        name: label; the panels are named ``"{name} {i}"``.
+        wrap: the cone the panels are cut from.
+        seams: seam directions.
+        opening_toward: direction of the middle of the opening.
+        opening: width of the opening [m] (0: closed).
+        anchor: body part whose joint carries the top edges (``None``: free).
+        top_f: axis fraction of the top edge.
+        bottom_f: axis fraction of the bottom edge.
     """
 
     name: str
-    start: tuple[float, float, float]
-    end: tuple[float, float, float]
-    half_length: float
-    radius: float
-    end_scale: float = 1.0
-    long_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    wrap: Wrap
+    seams: tuple[tuple[float, float, float], ...]
     opening_toward: tuple[float, float, float] = (0.0, 1.0, 0.0)
     opening: float = 0.0
     anchor: str | None = None
+    top_f: float = 0.0
+    bottom_f: float = 1.0
 
-    def _frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        start = np.asarray(self.start, np.float64)
-        axis = np.asarray(self.end, np.float64) - start
-        length = float(np.linalg.norm(axis))
-        ez = axis / length
-        ex = np.asarray(self.long_axis, np.float64)
-        ex = ex - (ex @ ez) * ez
-        if np.linalg.norm(ex) < 1e-9:
-            raise InputError(self.name, "long_axis", "is parallel to the tube's axis", "give a transverse direction")
-        ex = ex / np.linalg.norm(ex)
-        return start, ex, np.cross(ez, ex), ez, length
-
-    def perimeter(self) -> float:
-        """Perimeter of the cross-section at ``start`` [m]."""
-        return 4.0 * self.half_length + 2.0 * math.pi * self.radius
-
-    def area(self) -> float:
-        """Approximate surface area [m^2] (mean perimeter times slant length)."""
-        *_, length = self._frame()
-        mean_scale = 0.5 * (1.0 + self.end_scale)
-        flare = (self.end_scale - 1.0) * (self.radius + self.half_length)
-        return mean_scale * self.perimeter() * math.hypot(length, flare)
-
-
-def _stadium(half_length: float, radius: float, s: np.ndarray) -> np.ndarray:
-    """Points (n, 2) at arc lengths ``s`` on a stadium, starting at (0, radius), counter-clockwise."""
-    a, r = half_length, radius
-    total = 4.0 * a + 2.0 * math.pi * r
-    s = np.mod(s, total)
-    out = np.zeros((s.shape[0], 2))
-    bounds = np.cumsum([a, math.pi * r, 2.0 * a, math.pi * r, a])
-    seg = np.searchsorted(bounds, s, side="right")
-    seg = np.minimum(seg, 4)
-    # 0: top flat (0, r) -> (-a, r); 1: left arc; 2: bottom flat (-a, -r) -> (a, -r); 3: right arc; 4: top flat.
-    m = seg == 0
-    out[m] = np.stack([-s[m], np.full(m.sum(), r)], axis=1)
-    m = seg == 1
-    angle = math.pi / 2.0 + (s[m] - bounds[0]) / max(r, 1e-12)
-    out[m] = np.stack([-a + r * np.cos(angle), r * np.sin(angle)], axis=1)
-    m = seg == 2
-    out[m] = np.stack([-a + (s[m] - bounds[1]), np.full(m.sum(), -r)], axis=1)
-    m = seg == 3
-    angle = -math.pi / 2.0 + (s[m] - bounds[2]) / max(r, 1e-12)
-    out[m] = np.stack([a + r * np.cos(angle), r * np.sin(angle)], axis=1)
-    m = seg == 4
-    out[m] = np.stack([a - (s[m] - bounds[3]), np.full(m.sum(), r)], axis=1)
-    return out
+    def panels(self) -> tuple[list[Panel], list[tuple[int, int]]]:
+        """The pattern panels, left to right around the axis, and the sewn seams as ``(i, j)``: the
+        right seam line of panel ``i`` is sewn to the left one of panel ``j``."""
+        wrap = self.wrap
+        perimeter = wrap.perimeter
+        cuts = sorted({round(wrap.arc_toward(d), 9) for d in self.seams})
+        gap = None
+        if self.opening > 0.0:
+            middle = wrap.arc_toward(self.opening_toward)
+            half = 0.5 * self.opening
+            gap = ((middle - half) % perimeter, (middle + half) % perimeter)
+            cuts = sorted(set(cuts) | {round(gap[0], 9), round(gap[1], 9)})
+        if not cuts:
+            raise InputError(self.name, "seams", "a tube needs at least one seam or an opening",
+                             "give one or more seam directions")
+        intervals = list(zip(cuts, cuts[1:] + [cuts[0] + perimeter], strict=True))
+        kept = [gap is None or not _within(0.5 * (left + right) % perimeter, gap) for left, right in intervals]
+        panels, index = [], {}
+        for k, (left, right) in enumerate(intervals):
+            if kept[k]:
+                index[k] = len(panels)
+                panels.append(Panel(f"{self.name} {len(panels)}", wrap, left, right, self.top_f, self.bottom_f))
+        count = len(intervals)
+        sewn = [(index[k], index[(k + 1) % count]) for k in range(count) if kept[k] and kept[(k + 1) % count]]
+        return panels, sewn
 
 
-def tube_mesh(piece: TubePiece, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Mesh a piece with square-ish cells of side about ``cell`` [m].
+def _within(s: float, gap: tuple[float, float]) -> bool:
+    """Whether arc length ``s`` lies inside the (possibly wrapping) arc interval ``gap``."""
+    a, b = gap
+    return a <= s <= b if a <= b else (s >= a or s <= b)
 
-    Returns:
-        ``(vertices, faces, rest, first_row)``: (n, 3) float32 positions, (m, 3) int32 faces (checkerboard
-        diagonals as :func:`pscc.mesh.generate.grid_sheet`), (n, 2) float32 rest coordinates (the exact
-        development, centred on 0) and the vertex ids of the first row (the anchored end).
 
-    Raises:
-        InputError: a non-positive size or scale.
+@dataclass
+class GarmentMesh:
+    """The meshed panels of a set of garment pieces, ready for a :class:`pscc.sim.scene.Scene`.
+
+    Attributes:
+        vertices: (n, 3) float32 positions [m].
+        faces: (m, 3) int32 triangles.
+        rest: (n, 2) float32 pattern coordinates, panels laid out side by side [m].
+        object_ids: (m,) int32 piece index of each triangle: a piece's panels, sewn into one surface, are
+            one cloth object (so the normal-cone certificate may treat its closed seams as interior).
+        stitches: (s, 4) float64 rows ``(i, j, j, 0)`` of the sewn seams.
+        anchors: ``(vertex ids, body part)`` of each anchored panel's top edge.
+        panel_names: one name per panel.
+        panel_ids: (m,) int32 panel index of each triangle.
     """
-    if not (cell > 0.0 and piece.radius > 0.0 and piece.half_length >= 0.0 and piece.end_scale > 0.0):
-        raise InputError(piece.name, "size", "cell, radius and end_scale must be > 0, half_length >= 0",
-                         "fix the piece's dimensions")
-    start, ex, ey, ez, length = piece._frame()
-    perimeter = piece.perimeter()
-    mean_scale = 0.5 * (1.0 + piece.end_scale)
-    gap = max(piece.opening, cell / mean_scale)
-    if gap >= perimeter * 0.9:
-        raise InputError(piece.name, "opening", f"{piece.opening} m leaves almost nothing of the {perimeter:.3f} m "
-                         "perimeter", "narrow the opening")
-    nu = max(6, round(mean_scale * (perimeter - gap) / cell))
-    flare = (piece.end_scale - 1.0) * (piece.radius + piece.half_length)
-    nv = max(1, round(math.hypot(length, flare) / cell))
-    # Arc-length position of the opening's middle: the stadium point farthest along opening_toward.
-    probe_s = np.linspace(0.0, perimeter, 720, endpoint=False)
-    probe = _stadium(piece.half_length, piece.radius, probe_s)
-    toward = np.asarray(piece.opening_toward, np.float64)
-    middle = probe_s[int(np.argmax(probe @ np.array([toward @ ex, toward @ ey])))]
-    s = middle + gap / 2.0 + (perimeter - gap) * np.arange(nu + 1) / nu
-    curve = _stadium(piece.half_length, piece.radius, s)  # (nu + 1, 2) at scale 1
-    fraction = np.arange(nv + 1) / nv
-    scales = 1.0 + (piece.end_scale - 1.0) * fraction
-    heights = length * fraction
-    # vertex (i, j) = column i around, row j along; id j * (nu + 1) + i
-    local = scales[:, None, None] * curve[None, :, :]  # (nv + 1, nu + 1, 2)
-    vertices = (start + local[..., :1] * ex + local[..., 1:] * ey + heights[:, None, None] * ez).reshape(-1, 3)
-    slope = (piece.end_scale - 1.0) / length
-    if abs(slope) < 1e-9:
-        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
-        rest = np.stack(np.broadcast_arrays(chord[None, :], heights[:, None]), axis=-1).reshape(-1, 2)
-    else:
-        generators = np.concatenate([curve, np.full((nu + 1, 1), 1.0 / slope)], axis=1)  # apex -> row of scale 1
-        norms = np.linalg.norm(generators, axis=1)
-        cosine = np.einsum("ij,ij->i", generators[:-1], generators[1:]) / (norms[:-1] * norms[1:])
-        angles = np.concatenate([[0.0], np.cumsum(np.arccos(np.clip(cosine, -1.0, 1.0)))])
-        angles -= 0.5 * angles[-1]
-        radial = scales[:, None] * norms[None, :]
-        rest = np.stack([radial * np.cos(angles)[None, :], radial * np.sin(angles)[None, :]], axis=-1).reshape(-1, 2)
-    rest = rest - rest.mean(axis=0)
-    ii, jj = np.meshgrid(np.arange(nu), np.arange(nv))
-    ii, jj = ii.reshape(-1), jj.reshape(-1)
-    a = jj * (nu + 1) + ii
-    b, d = a + 1, a + nu + 1
-    c = d + 1
-    even = ((ii + jj) % 2 == 0)[:, None]
-    first = np.where(even, np.stack([a, b, c], axis=1), np.stack([a, b, d], axis=1))
-    second = np.where(even, np.stack([a, c, d], axis=1), np.stack([b, c, d], axis=1))
-    faces = np.stack([first, second], axis=1).reshape(-1, 3).astype(np.int32)
-    return vertices.astype(np.float32), faces, rest.astype(np.float32), np.arange(nu + 1)
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    rest: np.ndarray
+    object_ids: np.ndarray
+    stitches: np.ndarray
+    anchors: list[tuple[np.ndarray, str]]
+    panel_names: list[str]
+    panel_ids: np.ndarray
 
 
-def _cell_for(pieces: list[TubePiece], triangles: int) -> float:
-    """Cell size giving about ``triangles`` triangles over all pieces (within 2 % when feasible)."""
-    area = sum(p.area() for p in pieces)
-    cell = math.sqrt(2.0 * area / triangles)
-    for _ in range(4):
-        count = sum(tube_mesh(p, cell)[1].shape[0] for p in pieces)
+def sew_pieces(pieces: list[GarmentPiece], cell: float) -> GarmentMesh:
+    """Mesh every panel of ``pieces`` with cells of about ``cell`` [m] and sew their seams."""
+    vertices, faces, rest, objects, panel_ids, stitches, anchors, names = [], [], [], [], [], [], [], []
+    offset = 0
+    layout_x = 0.0
+    for piece_index, piece in enumerate(pieces):
+        panels, sewn = piece.panels()
+        meshes = [mesh_panel(panel, cell) for panel in panels]
+        starts = []
+        for panel, mesh in zip(panels, meshes, strict=True):
+            starts.append(offset)
+            flat = mesh.rest.astype(np.float64)
+            flat = flat - [flat[:, 0].min() - layout_x, flat[:, 1].min()]
+            layout_x = float(flat[:, 0].max()) + 0.05  # the next pattern piece 5 cm to the right
+            vertices.append(mesh.vertices)
+            faces.append(mesh.faces + offset)
+            rest.append(flat.astype(np.float32))
+            objects.append(np.full(mesh.faces.shape[0], piece_index, dtype=np.int32))
+            panel_ids.append(np.full(mesh.faces.shape[0], len(names), dtype=np.int32))
+            names.append(panel.name)
+            if piece.anchor is not None:
+                anchors.append((mesh.top_edge + offset, piece.anchor))
+            offset += mesh.vertices.shape[0]
+        positions = np.concatenate(vertices)
+        for i, j in sewn:
+            stitches.append(seam_stitches(meshes[i].right_seam + starts[i], meshes[j].left_seam + starts[j],
+                                          positions))
+    return GarmentMesh(np.concatenate(vertices), np.concatenate(faces).astype(np.int32),
+                       np.concatenate(rest), np.concatenate(objects),
+                       np.concatenate(stitches) if stitches else np.zeros((0, 4)), anchors, names,
+                       np.concatenate(panel_ids))
+
+
+def _cell_for(pieces: list[GarmentPiece], triangles: int) -> float:
+    """Cell size giving about ``triangles`` triangles over all panels (within a few per cent)."""
+    area = 0.0
+    for piece in pieces:
+        for panel in piece.panels()[0]:
+            corners = panel.wrap.develop(np.linspace(panel.s_left, panel.s_right, 257), np.full(257, panel.top_f))
+            bottom = panel.wrap.develop(np.linspace(panel.s_right, panel.s_left, 257), np.full(257, panel.bottom_f))
+            outline = np.concatenate([corners, bottom])
+            x, y = outline[:, 0], outline[:, 1]
+            area += 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    cell = math.sqrt(area / (triangles * math.sqrt(3.0) / 4.0))
+    for _ in range(2):
+        count = sum(mesh_panel(panel, cell).faces.shape[0] for piece in pieces for panel in piece.panels()[0])
         cell *= math.sqrt(count / triangles)
     return cell
 
 
-def _garment_scene(name: str, description: str, body: Body, garments: dict[str, list[TubePiece]], scale: float,
+def _garment_scene(name: str, description: str, body: Body, garments: dict[str, list[GarmentPiece]], scale: float,
                    frame_time: float, steps_per_frame: int, material: ClothMaterial | None = None) -> Scene:
-    """Mesh every piece (one object id each), anchor the first rows and add the body's obstacles."""
+    """Mesh and sew every garment's panels (one object id per piece), anchor their top edges and add the
+    skinned mannequin (:func:`pscc.scenes.mannequin.mannequin`) as the one obstacle."""
     from pscc.scenes.paper import PAPER_TRIANGLES, check_scale
 
     scale = check_scale(name, scale)
@@ -204,26 +194,18 @@ def _garment_scene(name: str, description: str, body: Body, garments: dict[str, 
                              "start every track at the identity (garments are fitted to the rest pose)")
     pieces = [p for group in garments.values() for p in group]
     cell = _cell_for(pieces, round(scale * PAPER_TRIANGLES[name]))
-    vertices, faces, rest, object_ids, handles = [], [], [], [], []
-    offset = 0
-    for index, piece in enumerate(pieces):
-        v, f, r, first_row = tube_mesh(piece, cell)
-        vertices.append(v)
-        faces.append(f + offset)
-        rest.append(r)
-        object_ids.append(np.full(f.shape[0], index, dtype=np.int32))
-        if piece.anchor is not None:
-            handles.append(Handle(first_row + offset, motion=body.motion(piece.anchor), name=f"{piece.name} anchor"))
-        offset += v.shape[0]
-    fine = scale >= 0.25
+    sewn = sew_pieces(pieces, cell)
+    handles = [Handle(ids, motion=body.motion(part), name=f"{sewn.panel_names[k]} anchor")
+               for k, (ids, part) in enumerate(sewn.anchors)]
+    body_cell = min(0.02, max(0.01, 1.2 * cell))
     return Scene(
         name=name, description=description,
-        vertices=np.concatenate(vertices), faces=np.concatenate(faces).astype(np.int32),
-        rest=np.concatenate(rest), object_ids=np.concatenate(object_ids),
+        vertices=sewn.vertices, faces=sewn.faces, rest=sewn.rest, object_ids=sewn.object_ids,
         material=material if material is not None else ClothMaterial(),
         solver=SolverConfig(),
         handles=handles,
-        obstacles=body.obstacles(around=48 if fine else 24, rings=16 if fine else 8),
+        obstacles=[mannequin(body, cell=body_cell)],
+        stitches=sewn.stitches,
         frame_time=frame_time, steps_per_frame=steps_per_frame,
     )
 
@@ -233,14 +215,18 @@ def _garment_scene(name: str, description: str, body: Body, garments: dict[str, 
 _UP = (0.0, 0.0, 1.0)
 _DOWN = (0.0, 0.0, -1.0)
 _FRONT = (0.0, 1.0, 0.0)
+_LEFT = (1.0, 0.0, 0.0)
+_RIGHT = (-1.0, 0.0, 0.0)
+_SIDE_SEAMS = (_LEFT, _RIGHT)
 _TORSO_HALF, _TORSO_RADIUS = 0.08, 0.10  # the humanoid's torso slab (stadium cross-section)
 _CLEARANCE = 0.015  # body to first layer
 _LAYER = 0.008  # between layers
 
 
 def _torso_piece(name: str, top: float, bottom: float, flare: float, offset: float, opening: float,
-                 reference_top: float = 1.29) -> TubePiece:
-    """A stadium cone around the torso, anchored to it at ``top``.
+                 reference_top: float = 1.29) -> GarmentPiece:
+    """Front and back panels around the torso sewn at the sides (the front cut in two when open),
+    anchored to it at ``top``.
 
     All torso layers share one cone: at height z the cross-section is stadium(0.08 l, (0.115 + offset) l)
     with l = 1 + flare (reference_top - z) / 0.37, so a layer with a larger ``offset`` stays outside one
@@ -251,22 +237,24 @@ def _torso_piece(name: str, top: float, bottom: float, flare: float, offset: flo
         return 1.0 + flare * (reference_top - z) / 0.37
 
     base = _TORSO_RADIUS + _CLEARANCE + offset
-    return TubePiece(name, (0.0, 0.0, top), (0.0, 0.0, bottom), half_length=_TORSO_HALF * scale(top),
-                     radius=base * scale(top), end_scale=scale(bottom) / scale(top), opening_toward=_FRONT,
-                     opening=opening, anchor="torso")
+    wrap = Wrap((0.0, 0.0, top), (0.0, 0.0, bottom), half_length=_TORSO_HALF * scale(top), radius=base * scale(top),
+                end_scale=scale(bottom) / scale(top))
+    return GarmentPiece(name, wrap, _SIDE_SEAMS, opening_toward=_FRONT, opening=opening, anchor="torso")
 
 
-def _sleeve(body: Body, side: str, name: str, radius: float, begin: float, end: float, flare: float) -> TubePiece:
-    """A tube around the upper arm from ``begin`` to ``end`` metres past the shoulder pivot."""
+def _sleeve(body: Body, side: str, name: str, radius: float, begin: float, end: float, flare: float) -> GarmentPiece:
+    """A sleeve around the upper arm from ``begin`` to ``end`` metres past the shoulder pivot: one panel
+    sewn into a tube along its underarm seam."""
     shoulder = np.asarray(next(j.pivot for j in body.joints if j.name == f"shoulder_{side}"))
     direction = arm_direction(side)
-    return TubePiece(name, tuple(shoulder + begin * direction), tuple(shoulder + end * direction), half_length=0.0,
-                     radius=radius, end_scale=flare, long_axis=(0.0, 1.0, 0.0), opening_toward=_DOWN,
-                     anchor=f"upper_arm_{side}")
+    wrap = Wrap(tuple(shoulder + begin * direction), tuple(shoulder + end * direction), half_length=0.0,
+                radius=radius, end_scale=flare, long_axis=(0.0, 1.0, 0.0))
+    return GarmentPiece(name, wrap, (_DOWN,), anchor=f"upper_arm_{side}")
 
 
-def _leg(body: Body, side: str, name: str, top: float, bottom: float) -> TubePiece:
-    """A trouser leg: a cone around thigh and shin from height ``top`` to ``bottom``, anchored to the thigh."""
+def _leg(body: Body, side: str, name: str, top: float, bottom: float) -> GarmentPiece:
+    """A trouser leg around thigh and shin from height ``top`` to ``bottom``, anchored to the thigh:
+    front and back panels sewn along the inseam and the outseam."""
     thigh, shin = body.parts[f"thigh_{side}"], body.parts[f"shin_{side}"]
     hip = np.asarray(thigh.core[0])
     ankle = np.asarray(shin.core[1])
@@ -276,16 +264,17 @@ def _leg(body: Body, side: str, name: str, top: float, bottom: float) -> TubePie
 
     top_radius = thigh.radius + _CLEARANCE
     bottom_radius = shin.radius + _CLEARANCE
-    inner = (-1.0 if side == "l" else 1.0, 0.0, 0.0)
-    return TubePiece(name, tuple(axis_at(top)), tuple(axis_at(bottom)), half_length=0.0, radius=top_radius,
-                     end_scale=bottom_radius / top_radius, long_axis=(0.0, 1.0, 0.0), opening_toward=inner,
-                     anchor=f"thigh_{side}")
+    wrap = Wrap(tuple(axis_at(top)), tuple(axis_at(bottom)), half_length=0.0, radius=top_radius,
+                end_scale=bottom_radius / top_radius, long_axis=(0.0, 1.0, 0.0))
+    return GarmentPiece(name, wrap, _SIDE_SEAMS, anchor=f"thigh_{side}")
 
 
-def _pelvis_piece(name: str, top: float, bottom: float, radius: float, flare: float, opening: float = 0.0) -> TubePiece:
-    """A stadium tube or cone around the pelvis and hips, anchored to the pelvis at ``top``."""
-    return TubePiece(name, (0.0, 0.0, top), (0.0, 0.0, bottom), half_length=0.06, radius=radius, end_scale=flare,
-                     opening_toward=_FRONT, opening=opening, anchor="pelvis")
+def _pelvis_piece(name: str, top: float, bottom: float, radius: float, flare: float,
+                  opening: float = 0.0) -> GarmentPiece:
+    """Front and back panels around the pelvis and hips sewn at the sides, anchored to the pelvis at ``top``
+    (a waistband)."""
+    wrap = Wrap((0.0, 0.0, top), (0.0, 0.0, bottom), half_length=0.06, radius=radius, end_scale=flare)
+    return GarmentPiece(name, wrap, _SIDE_SEAMS, opening_toward=_FRONT, opening=opening, anchor="pelvis")
 
 
 def _x(angle: float) -> np.ndarray:
@@ -348,25 +337,9 @@ def kungfu_body() -> Body:
     return humanoid(_keys(times, poses, joints))
 
 
-def kungfu(scale: float) -> Scene:
-    """Andy stand-in: a body in trousers, a shirt and a vest practising kung-fu (127K triangles at scale 1).
-
-    Garments (8 pieces, one object id each, all anchored at their first row):
-
-    * trousers: a hip piece (stadium cylinder 0.125 m radius around the pelvis, z 1.00 -> 0.66,
-      anchored to the pelvis) over two tapered legs (thigh radius + 1.5 cm -> shin radius + 1.5 cm,
-      z 0.70 -> 0.14, anchored to the thighs 9 cm below the hip pivot so a 90 degree kick keeps the
-      anchor clear of the pelvis; inner-seam slit one cell wide);
-    * shirt: a torso cone (1.5 cm off the torso at the armpit, z 1.29 -> 0.90, flaring so its hem
-      covers the hip piece 5 mm outside it; front slit one cell wide) and two short sleeves (upper
-      arm radius + 1.5 cm, 4 -> 22 cm past the shoulder pivot);
-    * vest: a torso cone 8 mm outside the shirt, z 1.27 -> 0.98, open in front (10 cm).
-
-    Motion: :func:`kungfu_body` (3.4 s). Time: 25 frames/s, 8 steps per frame (dt = 1/200 s, the
-    step I-Cloth reports for Andy; the paper's "1/25" is the character's frame rate).
-    """
-    body = kungfu_body()
-    garments = {
+def kungfu_garments(body: Body) -> dict[str, list[GarmentPiece]]:
+    """The pieces of trousers, shirt and vest of ``kungfu``, fitted to the body's rest pose, by garment."""
+    return {
         "trousers": [_pelvis_piece("trousers hips", 1.00, 0.66, 0.125, 1.0),
                      _leg(body, "l", "trousers left leg", 0.70, 0.14),
                      _leg(body, "r", "trousers right leg", 0.70, 0.14)],
@@ -375,6 +348,30 @@ def kungfu(scale: float) -> Scene:
                   _sleeve(body, "r", "shirt right sleeve", 0.045 + _CLEARANCE, 0.04, 0.22, 1.0)],
         "vest": [_torso_piece("vest", 1.27, 0.98, 0.19, _LAYER, 0.10)],
     }
+
+
+def kungfu(scale: float) -> Scene:
+    """Andy stand-in: a body in trousers, a shirt and a vest practising kung-fu (127K triangles at scale 1).
+
+    Garments (7 pieces, one object id each, 13 pattern panels, all anchored at their top edge):
+
+    * trousers: a hip piece (front and back panels sewn at the sides, stadium cylinder 0.125 m radius
+      around the pelvis, z 1.00 -> 0.66, anchored to the pelvis) over two tapered legs (front and back
+      panels sewn at the inseam and outseam; thigh radius + 1.5 cm -> shin radius + 1.5 cm, z 0.70 ->
+      0.14, anchored to the thighs 9 cm below the hip pivot so a 90 degree kick keeps the anchor clear
+      of the pelvis);
+    * shirt: a torso cone (front and back panels sewn at the sides; 1.5 cm off the torso at the armpit,
+      z 1.29 -> 0.90, flaring so its hem covers the hip piece 5 mm outside it) and two short sleeves
+      (one panel each sewn at the underarm; upper arm radius + 1.5 cm, 4 -> 22 cm past the shoulder
+      pivot);
+    * vest: a torso cone 8 mm outside the shirt, z 1.27 -> 0.98: a back panel and two front panels
+      sewn at the sides, open in front (10 cm).
+
+    Motion: :func:`kungfu_body` (3.4 s). Time: 25 frames/s, 8 steps per frame (dt = 1/200 s, the
+    step I-Cloth reports for Andy; the paper's "1/25" is the character's frame rate).
+    """
+    body = kungfu_body()
+    garments = kungfu_garments(body)
     return _garment_scene("kungfu", "kung-fu kicks and twists in trousers, shirt and vest (paper: Andy)", body,
                           garments, scale, frame_time=1.0 / 25.0, steps_per_frame=8)
 
@@ -417,23 +414,29 @@ def falling_body() -> Body:
     return humanoid(tracks, drop)
 
 
+def falling_garments(body: Body) -> dict[str, list[GarmentPiece]]:
+    """The pieces of the robe of ``falling``, fitted to the body's rest pose, by garment."""
+    return {
+        "robe": [_torso_piece("robe body", 1.29, 0.25, 0.7 * 0.37 / 1.04, 0.005, 0.06),
+                 _sleeve(body, "l", "robe left sleeve", 0.045 + 0.025, 0.04, 0.30, 1.5),
+                 _sleeve(body, "r", "robe right sleeve", 0.045 + 0.025, 0.04, 0.30, 1.5)],
+    }
+
+
 def falling(scale: float) -> Scene:
     """Falling stand-in: a man in a robe falls fast under strikes (172K triangles at scale 1).
 
-    Robe (3 pieces, anchored at their first row): a body cone open in front (6 cm), from the chest
-    (z 1.29, 1.5 cm off the torso, anchored to it) flaring 1.7 times to the shins (z 0.25), and two
-    bell sleeves (upper arm radius + 2.5 cm, 4 -> 30 cm past the shoulder pivot, flaring 1.5 times,
-    so the forearm moves freely inside).
+    Robe (3 pieces, 5 pattern panels, anchored at their top edge): a body cone (a back panel and two
+    front panels sewn at the sides, open in front over 6 cm) from the chest (z 1.29, 1.5 cm off the
+    torso, anchored to it) flaring 1.7 times to the shins (z 0.25), and two bell sleeves (one panel
+    each sewn at the underarm; upper arm radius + 2.5 cm, 4 -> 30 cm past the shoulder pivot, flaring
+    1.5 times, so the forearm moves freely inside).
 
     Motion: :func:`falling_body` (1.6 s; 1.2 m drop in the first second). Time: 30 frames/s (the
     paper's "1/30"), 6 steps per frame (dt = 1/180 s: the body moves up to 2.3 cm per step).
     """
     body = falling_body()
-    garments = {
-        "robe": [_torso_piece("robe body", 1.29, 0.25, 0.7 * 0.37 / 1.04, 0.005, 0.06),
-                 _sleeve(body, "l", "robe left sleeve", 0.045 + 0.025, 0.04, 0.30, 1.5),
-                 _sleeve(body, "r", "robe right sleeve", 0.045 + 0.025, 0.04, 0.30, 1.5)],
-    }
+    garments = falling_garments(body)
     return _garment_scene("falling", "a man in a robe falls fast under strikes (paper: Falling)", body, garments,
                           scale, frame_time=1.0 / 30.0, steps_per_frame=6)
 
@@ -465,31 +468,43 @@ def dance_body() -> Body:
     return humanoid(tracks)
 
 
-def dance(scale: float) -> Scene:
-    """Bishop stand-in: a swing dancer in a skirt, a shirt and a bolero spins (124K triangles at scale 1).
-
-    Garments (5 pieces, anchored at their first row): a flared skirt (stadium cone from the pelvis,
-    z 1.00, radius 0.125, to z 0.45, scale 1.8, front slit one cell wide); a shirt (torso cylinder
-    1.5 cm off the torso, z 1.29 -> 1.04, ending above the skirt; short sleeves as in ``kungfu``); a
-    bolero (torso cylinder 8 mm outside the shirt, z 1.27 -> 1.12, open in front over 12 cm).
-
-    Motion: :func:`dance_body` (2.4 s). Time: 30 frames/s (the paper's "1/30"), 4 steps per frame
-    (dt = 1/120 s, close to I-Cloth's 1/100 s for Bishop and a whole number of steps per frame).
-    """
-    body = dance_body()
-    garments = {
+def dance_garments(body: Body) -> dict[str, list[GarmentPiece]]:
+    """The pieces of skirt, shirt and bolero of ``dance``, fitted to the body's rest pose, by garment."""
+    return {
         "skirt": [_pelvis_piece("skirt", 1.00, 0.45, 0.125, 1.8)],
         "shirt": [_torso_piece("shirt body", 1.29, 1.04, 0.0, 0.0, 0.0),
                   _sleeve(body, "l", "shirt left sleeve", 0.045 + _CLEARANCE, 0.04, 0.22, 1.0),
                   _sleeve(body, "r", "shirt right sleeve", 0.045 + _CLEARANCE, 0.04, 0.22, 1.0)],
         "bolero": [_torso_piece("bolero", 1.27, 1.12, 0.0, _LAYER, 0.12)],
     }
+
+
+def dance(scale: float) -> Scene:
+    """Bishop stand-in: a swing dancer in a skirt, a shirt and a bolero spins (124K triangles at scale 1).
+
+    Garments (5 pieces, 9 pattern panels, anchored at their top edge): a flared skirt (front and back
+    panels, pieces of an annulus, sewn at the sides; stadium cone from the pelvis, z 1.00, radius
+    0.125, to z 0.45, scale 1.8); a shirt (front and back panels, torso cylinder 1.5 cm off the
+    torso, z 1.29 -> 1.04, ending above the skirt; short sleeves as in ``kungfu``); a bolero (torso
+    cylinder 8 mm outside the shirt, z 1.27 -> 1.12, a back panel and two front panels, open in
+    front over 12 cm).
+
+    Motion: :func:`dance_body` (2.4 s). Time: 30 frames/s (the paper's "1/30"), 4 steps per frame
+    (dt = 1/120 s, close to I-Cloth's 1/100 s for Bishop and a whole number of steps per frame).
+    """
+    body = dance_body()
+    garments = dance_garments(body)
     return _garment_scene("dance", "a swing dancer spins in skirt, shirt and bolero (paper: Bishop)", body, garments,
                           scale, frame_time=1.0 / 30.0, steps_per_frame=4)
 
 
 GARMENT_BODIES: dict[str, Callable[[], Body]] = {"kungfu": kungfu_body, "falling": falling_body, "dance": dance_body}
 """The animated body of each garment scene."""
+
+GARMENT_PIECES: dict[str, Callable[[Body], list[GarmentPiece]]] = {
+    name: (lambda body, fn=fn: [p for group in fn(body).values() for p in group])
+    for name, fn in (("kungfu", kungfu_garments), ("falling", falling_garments), ("dance", dance_garments))}
+"""Every garment piece of each garment scene, in the scene's order, for a body (its rest pose)."""
 
 GARMENT_DURATIONS: dict[str, float] = {"kungfu": KUNGFU_DURATION, "falling": FALLING_DURATION,
                                        "dance": DANCE_DURATION}

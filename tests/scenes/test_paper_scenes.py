@@ -2,8 +2,9 @@
 
 Every scene at its smallest scale: builds with the requested number of cloth triangles, starts free of
 intersections (the solver accepts it and ipctk's ``has_intersections`` agrees) and simulates two frames
-free of intersections. The body: forward kinematics moves a joint's descendants only, part meshes are
-closed, parts never touch during the garment animations and garment anchors keep clear of the body.
+free of intersections. The body: forward kinematics moves a joint's descendants only and part meshes are
+closed. Garment scenes: sewn from pattern panels whose seams start closed, on the skinned mannequin, with
+the cloth and its anchors clear of the body.
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ import ipctk
 import numpy as np
 import pytest
 
+from pscc.bench.oracle import cloth_crossings
 from pscc.errors import InputError
 from pscc.scenes.body import EasedMotion, Joint, humanoid, rounded_core_mesh, spin
-from pscc.scenes.garments import GARMENT_BODIES, GARMENT_DURATIONS, TubePiece, tube_mesh
+from pscc.scenes.garments import GARMENT_BODIES, GARMENT_DURATIONS, GARMENT_PIECES, sew_pieces
+from pscc.scenes.mannequin import SkinnedMesh, surface_field
 from pscc.scenes.paper import (
     MAX_SCALE,
     MIN_TRIANGLES,
@@ -27,14 +30,19 @@ from pscc.scenes.paper import (
     min_scale,
 )
 from pscc.sim.obstacles import rotation_from_axis_angle
+from pscc.sim.scene import Scene
 from pscc.sim.simulation import Simulation
 
 NAMES = list(PAPER_SCENES)
 
 
-def _has_intersections(faces: np.ndarray, positions: np.ndarray) -> bool:
-    mesh = ipctk.CollisionMesh(positions.astype(np.float64), ipctk.edges(faces), faces)
-    return ipctk.has_intersections(mesh, positions.astype(np.float64))
+def _has_intersections(faces: np.ndarray, positions: np.ndarray, scene: Scene) -> bool:
+    """ipctk finds an edge-face crossing that involves the cloth and that no stitch joins (a skinned body may
+    fold into itself at a bent joint; the cloth never may)."""
+    if scene.stitches is None and not any(isinstance(o, SkinnedMesh) for o in scene.obstacles):
+        mesh = ipctk.CollisionMesh(positions.astype(np.float64), ipctk.edges(faces), faces)
+        return ipctk.has_intersections(mesh, positions.astype(np.float64))
+    return cloth_crossings(positions, faces, scene.vertices.shape[0], scene.faces.shape[0], scene.stitches).size > 0
 
 
 # ---------------------------------------------------------------------------------------------- sizes
@@ -84,23 +92,28 @@ def test_scene_builds_intersection_free_and_simulates_two_frames(name: str) -> N
     assert scene.vertices.shape == (scene.rest.shape[0], 3) and scene.rest.shape[1] == 2
     assert scene.object_ids.shape == (triangles,) and scene.vertices.dtype == np.float32
     assert scene.faces.dtype == np.int32 and scene.object_ids.dtype == np.int32
-    # Every cloth piece starts unstrained: its rest edge lengths are its 3-D edge lengths.
+    # Every cloth piece starts unstrained: its rest edge lengths are its 3-D edge lengths (pattern panels
+    # wrapped on a curved surface: up to the chord of a curved edge, 1 - chord / arc ~ (cell / radius)^2 / 24,
+    # 2 % for the 4 cm cells of the smallest scale on a 6 cm sleeve).
     edges = np.unique(np.sort(np.concatenate([scene.faces[:, [0, 1]], scene.faces[:, [1, 2]],
                                               scene.faces[:, [2, 0]]]), axis=1), axis=0)
     length_3d = np.linalg.norm(scene.vertices[edges[:, 0]] - scene.vertices[edges[:, 1]], axis=1)
     length_rest = np.linalg.norm(scene.rest[edges[:, 0]] - scene.rest[edges[:, 1]], axis=1)
-    np.testing.assert_allclose(length_3d, length_rest, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(length_3d, length_rest, rtol=0.025 if name in GARMENT_BODIES else 1e-4, atol=1e-6)
+    if scene.stitches is not None:  # sewn seams start closed
+        rows = scene.stitches.astype(np.int64)
+        assert np.abs(scene.vertices[rows[:, 0]] - scene.vertices[rows[:, 1]]).max() < 1e-5
 
     simulation = Simulation(scene, device="cpu")  # raises InputError on an intersecting initial state
     solver = simulation.solver
     faces = solver.collision_faces
-    assert not _has_intersections(faces, simulation.state.positions.numpy())
+    assert not _has_intersections(faces, simulation.state.positions.numpy(), scene)
     initial = scene.vertices.astype(np.float64)
     for frame in range(2):
         stats = simulation.step_frame()
         positions = simulation.state.positions.numpy()
         assert np.all(np.isfinite(positions))
-        assert not _has_intersections(faces, positions), f"{name}: intersection after frame {frame + 1}"
+        assert not _has_intersections(faces, positions, scene), f"{name}: intersection after frame {frame + 1}"
         for handle in scene.handles:
             rotation, translation = handle.transform(simulation.time)
             np.testing.assert_allclose(positions[handle.vertices], initial[handle.vertices] @ rotation.T + translation,
@@ -181,35 +194,34 @@ def test_body_rejects_bad_hierarchies() -> None:
 
 
 @pytest.mark.parametrize("name", list(GARMENT_BODIES))
-def test_garment_bodies_keep_parts_and_anchors_apart(name: str) -> None:
+def test_garments_are_sewn_panels_on_the_mannequin_and_keep_clear_of_it(name: str) -> None:
     body = GARMENT_BODIES[name]()
-    times = np.linspace(0.0, GARMENT_DURATIONS[name], 49)
-    gaps = body.min_gaps(times, spacing=0.01)
-    assert min(gaps.values()) >= 0.005, min(gaps.items(), key=lambda item: item[1])
     scene = PAPER_SCENES[name](min_scale(name))
-    assert {o.name for o in scene.obstacles} == set(body.parts)
+    assert len(scene.obstacles) == 1 and isinstance(scene.obstacles[0], SkinnedMesh)
+    # Several panels per garment, every panel sewn to another (or to itself, a sleeve), each piece's panels
+    # one cloth object.
+    pieces = GARMENT_PIECES[name](body)
+    sewn_mesh = sew_pieces(pieces, 0.03)
+    panels = len(sewn_mesh.panel_names)
+    assert panels >= 2 * len(pieces) - 2 and panels >= 5
+    assert int(scene.object_ids.max()) + 1 == len(pieces)
+    owner = np.zeros(sewn_mesh.vertices.shape[0], dtype=np.int64)
+    owner[sewn_mesh.faces.reshape(-1)] = np.repeat(sewn_mesh.panel_ids, 3)
+    rows = sewn_mesh.stitches.astype(np.int64)
+    sewn = set(owner[rows[:, 0]].tolist()) | set(owner[rows[:, 1]].tolist())
+    assert sewn == set(range(panels))
+    assert np.array_equal(np.unique(sewn_mesh.object_ids), np.arange(len(pieces)))
+    # The cloth starts at least 5 mm off the mannequin's surface.
+    field = surface_field(body)
+    assert field(scene.vertices.astype(np.float64)).min() >= 0.005
+    # Anchored top edges keep at least 5 mm off the parts of the body over the animation.
+    times = np.linspace(0.0, GARMENT_DURATIONS[name], 25)
     for handle in scene.handles:
         x = scene.vertices[handle.vertices].astype(np.float64)
         for t in times:
             rotation, translation = handle.transform(t)
             distances = body.surface_distance(x @ rotation.T + translation, t)
-            assert min(d.min() for d in distances.values()) >= 0.01, (handle.name, t)
-
-
-# ---------------------------------------------------------------------------------------------- pieces, motion
-
-
-@pytest.mark.parametrize("end_scale", [1.0, 1.6, 0.8])
-def test_tube_rest_shape_is_the_exact_development(end_scale: float) -> None:
-    piece = TubePiece("t", (0.0, 0.0, 1.0), (0.0, 0.1, 0.4), half_length=0.05, radius=0.1, end_scale=end_scale,
-                      opening=0.05)
-    vertices, faces, rest, first_row = tube_mesh(piece, 0.02)
-    for a, b in ((0, 1), (1, 2), (2, 0)):
-        length_3d = np.linalg.norm(vertices[faces[:, a]] - vertices[faces[:, b]], axis=1)
-        length_rest = np.linalg.norm(rest[faces[:, a]] - rest[faces[:, b]], axis=1)
-        np.testing.assert_allclose(length_3d, length_rest, rtol=1e-4)
-    axis = np.array([0.0, 0.1, -0.6]) / np.linalg.norm([0.0, 0.1, -0.6])
-    np.testing.assert_allclose((vertices[first_row] - [0.0, 0.0, 1.0]) @ axis, 0.0, atol=1e-6)
+            assert min(d.min() for d in distances.values()) >= 0.005, (handle.name, t)
 
 
 def test_eased_motion_is_smooth_and_starts_at_rest() -> None:
