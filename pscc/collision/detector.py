@@ -34,6 +34,7 @@ from pscc.collision.contacts import DeviceContacts
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
+from pscc.collision.intrinsic import intrinsic_coordinates
 from pscc.collision.narrow_phase import NarrowPhase
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
@@ -90,7 +91,8 @@ class CollisionDetector:
             object). Ids need not be contiguous; memory grows with the number of distinct ids.
         device: Warp device name (default: Warp's default device).
         rest: optional (vertex_count, 2 or 3) material-space coordinates for the ``pscc`` BVH;
-            when omitted, the BVH is built over the first positions seen.
+            when omitted, the BVH is built over an embedding of the first positions seen by distance
+            along the surface (:func:`pscc.collision.intrinsic.intrinsic_coordinates`).
         rigid_objects: object ids that are rigid obstacles: each is one front node, so its own
             faces are never tested against each other.
         shrink_interval: ``pscc`` shrinks its test front every this many calls.
@@ -215,7 +217,9 @@ class CollisionDetector:
             self.spatial_hash.lend_scratch(self._lent_scratch, self._scratch_source())
         self.feature_pairs = FeaturePairs(mesh.faces, self.device_topology, device, self.seams)
         if self.method == "pscc":
-            material = mesh.rest if mesh.rest is not None else mesh.vertices
+            # Without rest coordinates the BVH groups faces by distance along the surface, not in the first
+            # 3-D shape, where folded layers would share nodes (pscc.collision.intrinsic).
+            material = mesh.rest if mesh.rest is not None else intrinsic_coordinates(mesh.faces, mesh.vertices)
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
                                          self._rigid_objects, self._stitches)
             self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)

@@ -1,0 +1,124 @@
+"""Material coordinates for a mesh that has none: an embedding of its surface, not of its folds.
+
+PSCC builds its BVH in material space (rest or UV coordinates), where neighbouring nodes are
+neighbouring patches of cloth, so a node's normal cone measures how much its patch bends. A mesh
+given without rest coordinates (frames from another system, a scanned garment) used to be built in
+its first 3-D shape: folded layers lying on each other then fall into the same nodes, whose cones
+span both layers and never pass, and culling nearly vanishes.
+
+:func:`intrinsic_coordinates` places every vertex by its distances *along the surface* instead
+(landmark Isomap, de Silva and Tenenbaum 2003):
+
+1. Edge graph of the mesh weighted by 3-D edge lengths; each connected piece is embedded alone.
+2. ``landmarks`` vertices by farthest-point sampling of graph distances (the first is the vertex
+   farthest from the piece's lowest vertex id, so the choice is deterministic), and Dijkstra's
+   distances from each to every vertex.
+3. Classical multidimensional scaling of the landmarks' squared distances gives their 3-D
+   coordinates; every other vertex is placed by the landmarks' distance-based triangulation.
+
+Two layers folded onto each other are far apart along the surface, so they land far apart in the
+embedding, while a developable sheet embeds close to its flat layout. Only the BVH's grouping uses
+the coordinates: the normal-cone and contour tests run on the actual positions, so the embedding's
+distortion costs culling, never correctness.
+
+Runs once, on the host (scipy's Dijkstra), when a detector is set up without rest coordinates:
+about 0.04 s for 20K triangles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["DEFAULT_LANDMARKS", "intrinsic_coordinates"]
+
+DEFAULT_LANDMARKS: int = 12
+"""Landmarks per connected piece (fewer for pieces with fewer vertices)."""
+
+
+def _edge_graph(faces: np.ndarray, positions: np.ndarray) -> object:
+    """Symmetric sparse matrix of the mesh's edges weighted by their 3-D lengths (at least 1e-12)."""
+    import scipy.sparse as sparse
+
+    n = positions.shape[0]
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
+    lengths = np.maximum(np.linalg.norm(positions[edges[:, 0]] - positions[edges[:, 1]], axis=1), 1e-12)
+    graph = sparse.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    return graph.maximum(graph.T)
+
+
+def _embed_piece(graph: object, landmarks: int) -> np.ndarray:
+    """Landmark-MDS coordinates (m, 3) of one connected piece given its edge graph (m x m)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    m = graph.shape[0]
+    start = int(np.argmax(dijkstra(graph, indices=[0])[0]))
+    chosen = [start]
+    rows = [dijkstra(graph, indices=[start])[0]]
+    nearest = rows[0].copy()
+    for _ in range(min(landmarks, m) - 1):
+        far = int(np.argmax(nearest))
+        if nearest[far] <= 0.0:
+            break
+        chosen.append(far)
+        rows.append(dijkstra(graph, indices=[far])[0])
+        nearest = np.minimum(nearest, rows[-1])
+    distances = np.stack(rows)  # (L, m)
+    count = len(chosen)
+    squared = distances[:, chosen] ** 2
+    centring = np.eye(count) - 1.0 / count
+    gram = -0.5 * centring @ squared @ centring
+    values, vectors = np.linalg.eigh(gram)
+    order = np.argsort(values)[::-1][:3]
+    values, vectors = values[order], vectors[:, order]
+    keep = values > 1e-12 * max(float(values[0]), 1e-300) if values.size else np.zeros(0, dtype=bool)
+    out = np.zeros((m, 3))
+    if not np.any(keep):
+        return out
+    pseudo_inverse = vectors[:, keep] / np.sqrt(values[keep])  # (L, k)
+    mean = squared.mean(axis=1)
+    out[:, : int(keep.sum())] = -0.5 * ((distances**2) - mean[:, None]).T @ pseudo_inverse
+    return out
+
+
+def intrinsic_coordinates(faces: np.ndarray, positions: np.ndarray,
+                          landmarks: int = DEFAULT_LANDMARKS) -> np.ndarray:
+    """(n, 3) float64 material coordinates from distances along the surface (module docstring).
+
+    Connected pieces are embedded one by one and set side by side along x, one piece's extent apart.
+    Vertices in no face keep their positions' coordinates, moved past the last piece.
+
+    Args:
+        faces: (m, 3) vertex ids.
+        positions: (n, 3) positions (the mesh's first shape).
+        landmarks: landmarks per piece (>= 3 for a 3-D embedding).
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    n = positions.shape[0]
+    out = positions.copy()
+    if faces.shape[0] == 0:
+        return out
+    graph = _edge_graph(faces, positions)
+    count, label = connected_components(graph, directed=False)
+    used = np.zeros(n, dtype=bool)
+    used[faces.reshape(-1)] = True
+    offset = 0.0
+    for piece in range(count):
+        ids = np.flatnonzero((label == piece) & used)
+        if ids.size == 0:
+            continue
+        if ids.size < 4:
+            coords = positions[ids] - positions[ids].min(axis=0)
+        else:
+            coords = _embed_piece(graph[ids][:, ids], landmarks)
+            coords -= coords.min(axis=0)
+        extent = float(np.ptp(coords, axis=0).max()) if ids.size > 1 else 0.0
+        coords[:, 0] += offset
+        out[ids] = coords
+        offset += float(np.ptp(coords[:, 0])) + max(extent, 1e-6)
+    loose = ~used
+    if np.any(loose):
+        out[loose] = positions[loose] - positions[loose].min(axis=0) + [offset, 0.0, 0.0]
+    return out

@@ -1,0 +1,70 @@
+"""Material coordinates for meshes given without rest (``pscc.collision.intrinsic``): folded layers land far
+apart, the detector culls more than in the first 3-D shape and still misses no contact."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pscc.bench.broad_phase import contact_radius, twisted_layers
+from pscc.collision.detector import CollisionDetector
+from pscc.collision.intrinsic import intrinsic_coordinates
+from pscc.mesh.generate import folded_sheet, grid_sheet
+from tests.collision.test_pscc import _assert_same_contacts, _check_dcd_contract, _detectors
+
+
+def test_folded_layers_land_far_apart_and_neighbours_stay_close() -> None:
+    mesh = folded_sheet(1200, layers=3, seed=2)
+    x = mesh.vertices_end.astype(np.float64)
+    coords = intrinsic_coordinates(mesh.faces, x)
+    assert coords.shape == x.shape and np.all(np.isfinite(coords))
+    # Edges keep about their length (distances along the surface of a developable sheet).
+    edges = np.concatenate([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]]])
+    ratio = np.linalg.norm(coords[edges[:, 0]] - coords[edges[:, 1]], axis=1) / np.linalg.norm(
+        x[edges[:, 0]] - x[edges[:, 1]], axis=1)
+    assert 0.5 < np.median(ratio) < 1.5
+    # A vertex's nearest vertex in 3-D on another layer is far away in the embedding, as in the rest layout.
+    rest = mesh.rest.astype(np.float64)
+    far_in_rest = np.linalg.norm(rest[:, None, :2] - rest[None, :, :2], axis=2) > 0.5
+    close_in_3d = np.linalg.norm(x[:, None] - x[None, :], axis=2) < 0.2
+    pairs = np.argwhere(far_in_rest & close_in_3d)
+    assert pairs.shape[0] > 100
+    separation = np.linalg.norm(coords[pairs[:, 0]] - coords[pairs[:, 1]], axis=1)
+    assert np.median(separation) > 0.4
+
+
+def test_pieces_are_set_apart_and_the_result_is_deterministic() -> None:
+    vertices, faces, _ = grid_sheet(6, 6)
+    two = np.concatenate([vertices, vertices + [0.0, 0.0, 0.001]]).astype(np.float64)
+    both = np.concatenate([faces, faces + vertices.shape[0]])
+    loose = np.concatenate([two, [[5.0, 5.0, 5.0]]])
+    first = intrinsic_coordinates(both, loose)
+    np.testing.assert_array_equal(first, intrinsic_coordinates(both, loose))
+    a, b = first[: vertices.shape[0]], first[vertices.shape[0]: 2 * vertices.shape[0]]
+    assert a[:, 0].max() < b[:, 0].min()  # the stacked copies are side by side, not on each other
+    assert first[-1, 0] > b[:, 0].max()  # a vertex in no face is moved past the pieces
+    assert intrinsic_coordinates(np.zeros((0, 3), np.int64), loose).shape == loose.shape
+
+
+def test_without_rest_the_detector_culls_more_than_in_the_first_shape() -> None:
+    mesh = twisted_layers(4000)
+    radius = contact_radius(mesh)
+    pairs = {}
+    for label, rest in (("first shape", mesh.vertices_end), ("intrinsic", None)):
+        detector = CollisionDetector(mesh.faces, method="pscc", rest=rest, device="cpu")
+        detector.detect(mesh.vertices_end, thickness=radius)
+        pairs[label] = detector.detect(mesh.vertices_end, thickness=radius).stats["triangle_pairs"]
+    assert pairs["intrinsic"] < 0.8 * pairs["first shape"], pairs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_without_rest_no_contact_is_missed(seed: int) -> None:
+    mesh = folded_sheet(800, layers=3, seed=seed)
+    rng = np.random.default_rng(seed)
+    x = (mesh.vertices_end + rng.normal(0.0, 0.01, mesh.vertices.shape)).astype(np.float32)
+    _check_dcd_contract(mesh.faces, x, 0.02, _detectors(mesh.faces, None))
+    detectors = _detectors(mesh.faces, None)
+    reference = detectors["brute-force"].detect(mesh.vertices, x)
+    assert len(reference.vertex_face) + len(reference.edge_edge) > 0
+    _assert_same_contacts(detectors["pscc"].detect(mesh.vertices, x), reference, mesh.faces, mesh.vertices, x,
+                          0.0, "pscc without rest")
