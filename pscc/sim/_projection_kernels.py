@@ -129,6 +129,52 @@ def _append_stitch_constraints(
 
 
 @wp.kernel
+def _append_near_constraints(
+    # in:
+    spring_vertices: wp.array(dtype=wp.vec4i),
+    spring_weights: wp.array(dtype=wp.vec4),
+    spring_normals: wp.array(dtype=wp.vec3),
+    spring_count: wp.array(dtype=wp.int32),
+    inverse_mass: wp.array(dtype=float),
+    positions_t1: wp.array(dtype=wp.vec3),
+    separation: float,
+    gate: wp.array(dtype=wp.int32),
+    # out:
+    constraints: ConstraintArgs,
+    multiplier: wp.array(dtype=float),
+    extrapolated: wp.array(dtype=float),
+):
+    """One thread per contact spring slot (when ``gate[0]`` is 1): a spring with a free vertex appends a
+    proximity constraint ``n . sum_a w_a x_a >= min(separation, g)``, ``g`` its gap at ``positions_t1``
+    (offset ``min(0, g - separation)``): met where the positions are, so the response may not push the pair
+    closer than it is (or than ``separation``)."""
+    k = wp.tid()
+    if gate[0] != 1:
+        return
+    if k >= wp.min(spring_count[0], spring_vertices.shape[0]):
+        return
+    ids = spring_vertices[k]
+    free = float(0.0)
+    for j in range(4):
+        free += inverse_mass[ids[j]]
+    if free == 0.0:
+        return  # nothing the response can move
+    w = spring_weights[k]
+    n = spring_normals[k]
+    gap = wp.dot(n, weighted_sum(w, positions_t1[ids[0]], positions_t1[ids[1]], positions_t1[ids[2]],
+                                 positions_t1[ids[3]]))
+    slot = wp.atomic_add(constraints.count, 0, 1)
+    if slot >= constraints.vertices.shape[0]:
+        return  # overflow: the counter keeps the true number for check_capacity()
+    constraints.vertices[slot] = ids
+    constraints.weights[slot] = w
+    constraints.normals[slot] = n
+    constraints.offset[slot] = wp.min(gap - separation, 0.0)
+    multiplier[slot] = 0.0
+    extrapolated[slot] = 0.0
+
+
+@wp.kernel
 def _weight_sums(
     # in:
     constraints: ConstraintArgs,

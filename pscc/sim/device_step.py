@@ -456,6 +456,9 @@ class DeviceStep:
         solver = self.solver
         projection = solver.projection
         projection.add_device(contacts.args, x0, x1)
+        if solver.contact.proximity_constraints:
+            # First round only (the round counter is 1): the contact springs as proximity constraints.
+            projection.add_near_device(solver.proximity.springs, x1, solver.separation, gate=self._control)
         self._flag_projection_overflow()
         projection.solve_device(x1, solver.separation, solver.response_tolerance)
         wp.launch(_add_counter, dim=1, inputs=[projection.iteration_count, 0, PROJECTION_ITERATIONS],
@@ -491,8 +494,11 @@ class DeviceStep:
         grew = False
         if report[NEAR_FULL_SPRINGS]:
             springs = solver.proximity.springs
+            before = springs.capacity
             springs.ensure(int(NEAR_FULL_GROWTH * springs.capacity))
             solver.integrator.system.reserve_contacts(springs.capacity)
+            if solver.contact.proximity_constraints:  # the springs join the projection's first round
+                solver.projection.reserve(solver.projection.capacity + springs.capacity - before)
             grew = True
         hashes: dict[int, tuple[Any, set[int]]] = {}  # the check may share the detector's hash: grow it once
         for slot, spatial_hash in ((NEAR_FULL_BROAD_PHASE, getattr(solver.detector, "spatial_hash", None)),

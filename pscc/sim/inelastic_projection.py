@@ -23,6 +23,14 @@ zone, the colliding cloth keeps deforming and can slide along a kinematic object
 region that touches two differently moving objects (a spinning ball and a held corner) is solved
 instead of failing.
 
+**Proximity constraints.** Pairs that already touch (the contact springs of the step's start, closer than
+the thickness) join the first round of a step as constraints of the same form with the spring's weights and
+normal, their floor lowered to the gap ``g~`` they have at the integrator's end positions:
+``g_k(x) >= min(separation, g~_k)`` (:meth:`InelasticProjection.add_near`). The integrator's positions meet
+them, so they change nothing unless a response pushes a vertex out of one collision towards a surface it
+touches on its other side (tangled layers, cloth on a body): then the neighbour is moved along instead of
+being run into, which the next CCD round would have found.
+
 **Solver.** The dual of this quadratic programme is solved by accelerated projected gradient
 ascent (FISTA, Beck and Teboulle 2009, with the adaptive restart of O'Donoghue and Candes 2015), one
 thread per constraint (Jacobi, so the result does not depend on the order of the pairs). With
@@ -78,6 +86,7 @@ from pscc.sim._projection_kernels import (
     _VIOLATION,
     ConstraintArgs,
     _append_constraints,
+    _append_near_constraints,
     _append_stitch_constraints,
     _begin_iteration,
     _close_block,
@@ -88,6 +97,7 @@ from pscc.sim._projection_kernels import (
     _start_solve,
     _weight_sums,
 )
+from pscc.sim.contact_springs import ContactSprings
 
 wp.set_module_options({"enable_backward": False})
 
@@ -180,6 +190,7 @@ class InelasticProjection:
         """(2,) float32 [momentum, violation at the last check]."""
         self.running = wp.zeros(1, dtype=wp.int32, device=dev)
         """(1,) int32 loop condition of :meth:`solve_device`."""
+        self._open_gate = wp.ones(1, dtype=wp.int32, device=dev)
         self._launches: _SolveLaunches | None = None
         self._allocate(_INITIAL_CAPACITY)
 
@@ -322,6 +333,45 @@ class InelasticProjection:
         wp.launch(_append_stitch_constraints, dim=stitch_vertices.shape[0], device=self.device,
                   inputs=[stitch_vertices, stitch_weights, positions_t1, float(separation), float(slack)],
                   outputs=[self.constraints, self.multiplier, self.extrapolated])
+
+    def add_near_device(self, springs: ContactSprings, positions_t1: wp.array, separation: float,
+                        gate: wp.array | None = None) -> None:
+        """Append one proximity constraint per contact spring with a free vertex: ``n . sum_a w_a x_a >=
+        min(separation, g)`` with the spring's weights and normal (its closest points at the step's start)
+        and ``g`` its gap at ``positions_t1`` (the end positions before any response).
+
+        The constraint holds where the positions are, so it changes nothing by itself; it keeps a response
+        that pushes one vertex out of a collision from pushing it into the surface it already touches
+        (which the next CCD round would find). The constraints count against the capacity like the
+        collisions' (:meth:`check_capacity`).
+
+        Args:
+            springs: the contact springs of the step's start (:class:`pscc.sim.contact_springs.ContactSprings`,
+                the last DCD's).
+            positions_t1: (vertex_count,) vec3 end positions [m].
+            separation: the solve's separation [m].
+            gate: (1,) int32: append only while ``gate[0]`` is 1 (the device step passes its round
+                counter: the first round only); ``None``: always.
+
+        Allocates: no. Capture-safe: yes.
+        """
+        wp.launch(_append_near_constraints, dim=springs.capacity, device=self.device,
+                  inputs=[springs.vertices, springs.weights, springs.normals, springs.count, self.inverse_mass,
+                          positions_t1, float(separation), self._open_gate if gate is None else gate],
+                  outputs=[self.constraints, self.multiplier, self.extrapolated])
+
+    def add_near(self, springs: ContactSprings, positions_t1: wp.array, separation: float) -> None:
+        """:meth:`add_near_device`, growing the buffers when they overflow (the host path).
+
+        Allocates: when growing. Capture-safe: no (a sync point: reads the constraint counter).
+        """
+        before = self.count
+        self._grow(before + springs.host_count)
+        while True:
+            self.add_near_device(springs, positions_t1, separation)
+            if self.check_capacity():
+                return
+            self.constraint_count.fill_(before)  # rewind: the stored constraints below are kept
 
     def add(self, vertex_face: np.ndarray, vertex_face_toi: np.ndarray, edge_edge: np.ndarray,
             edge_edge_toi: np.ndarray, positions_t0: wp.array, positions_t1: wp.array) -> None:

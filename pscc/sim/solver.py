@@ -211,10 +211,11 @@ class ClothSolver:
         self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)
-        # Room for contact before it happens (the device path flags an overflow and redoes the frame), and
-        # for the six constraints of every stitch.
-        self.projection.reserve(self.cloth_face_count // 4 + 6 * int(np.asarray(scene.stitches).shape[0]
-                                                                       if scene.stitches is not None else 0))
+        # Room for contact before it happens (the device path flags an overflow and redoes the frame): the
+        # collisions, the proximity constraints of the springs' initial capacity, and the six constraints of
+        # every stitch.
+        self.projection.reserve(self._projection_floor(self.cloth_face_count // 4)
+                                + 6 * int(np.asarray(scene.stitches).shape[0] if scene.stitches is not None else 0))
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
@@ -588,7 +589,8 @@ class ClothSolver:
         if report[CG_FAILED] and not failed:
             failed = ["the linear solve overflowed"]
         if not failed:
-            if runner.grow_near_full(report) | self._trim_projection(int(report[PROJECTION_PEAK])) \
+            if runner.grow_near_full(report) \
+                    | self._trim_projection(int(report[PROJECTION_PEAK]), int(report[CONTACTS])) \
                     | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]]) \
                     | self._trim_springs(int(report[CONTACTS])) \
                     | self._trim_candidates([int(v) for v in report[CANDIDATE_PEAKS:CANDIDATE_PEAKS + 2]]):
@@ -646,13 +648,13 @@ class ClothSolver:
         seconds["total"] = time.perf_counter() - started
         return {"steps": steps, "seconds": seconds, "counts": counts}
 
-    def _trim_projection(self, peak: int) -> bool:
-        """Shrink the projection's constraint buffers (to 4 x the recent peak) once the last
-        :data:`TRIM_FRAMES` frames used less than a sixteenth of them: contact peaks at the start of a
-        scene (layers landing) would otherwise hold their memory for the whole run. Returns whether
-        the buffers changed."""
+    def _trim_projection(self, peak: int, contacts: int) -> bool:
+        """Shrink the projection's constraint buffers (to 4 x the recent peak, keeping room for ``contacts``
+        proximity constraints, the frame's most springs) once the last :data:`TRIM_FRAMES` frames used less
+        than a sixteenth of them: contact peaks at the start of a scene (layers landing) would otherwise hold
+        their memory for the whole run. Returns whether the buffers changed."""
         self._projection_peaks = (self._projection_peaks + [peak])[-TRIM_FRAMES:]
-        floor = self.cloth_face_count // 4
+        floor = self._projection_floor(contacts)
         target = max(4 * max(self._projection_peaks), floor)
         if len(self._projection_peaks) < TRIM_FRAMES or 16 * max(self._projection_peaks) > self.projection.capacity \
                 or target >= self.projection.capacity:
@@ -660,6 +662,11 @@ class ClothSolver:
         self.projection.trim(target)
         self._projection_peaks = []
         return True
+
+    def _projection_floor(self, springs: int) -> int:
+        """Constraint slots the projection keeps at least: a quarter per cloth face for collisions, plus one per
+        contact spring slot (``springs``) when the springs join the first round (``proximity_constraints``)."""
+        return self.cloth_face_count // 4 + (int(springs) if self.contact.proximity_constraints else 0)
 
     def _rebuild_springs(self, state: ClothState) -> None:
         """The contact springs of ``state``: a DCD at its positions and :meth:`ProximityContacts.update_device`
@@ -889,6 +896,9 @@ class ClothSolver:
                 # positions_t1 holds x1 here: the integrator's end positions or the last projection.
                 self.projection.add(vertex_face, result.vertex_face_toi, result.edge_edge, result.edge_edge_toi,
                                     positions_t0, positions_t1)
+                if rounds == 1 and self.contact.proximity_constraints:
+                    # The pairs already in contact may not be pushed closer (the next round's collisions).
+                    self.projection.add_near(springs, positions_t1, self.separation)
                 solved = self.projection.solve(positions_t1, self.separation, tolerance)
                 counts["projection_iterations"] += solved.iterations
                 x1 = positions_t1.numpy()
