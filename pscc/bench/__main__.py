@@ -7,7 +7,9 @@ Sections:
 2. CCD throughput on random trajectories (generic, mostly separated queries).
 3. The brute-force detector on folded three-layer cloth at 1K, 4K and 16K triangles (CCD and DCD).
 4. The broad phase: pscc against spatial hashing and Newton at 50K and 200K triangles
-   (:mod:`pscc.bench.broad_phase`).
+   (:mod:`pscc.bench.broad_phase`), then on a corpus of frames not designed for pscc (paper scenes at
+   tangled moments, Newton's cloth examples, Newton's shirt) against spatial hashing, Newton's
+   detector and ipctk's LBVH (:mod:`pscc.bench.corpus_bench`).
 5. The cloth simulator side by side with Newton's VBD solver on ``drape`` and ``twist``: seconds per
    frame and frames with intersections (:mod:`pscc.bench.simulator`).
 6. The cloth simulator's seconds per stage and device memory per structure on ``drape``, ``stack`` and
@@ -34,7 +36,7 @@ import numpy as np
 import warp as wp
 from tqdm import tqdm
 
-from pscc.bench import broad_phase, device_path, garments, simulator
+from pscc.bench import broad_phase, corpus, corpus_bench, device_path, garments, simulator
 from pscc.bench import scenes as paper_scenes
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
@@ -159,6 +161,8 @@ def write_report(results: dict[str, Any], out: Path) -> None:
         lines += _detector_lines(results, out)
     if results.get("broad_phase"):
         lines += broad_phase.report(results["broad_phase"])
+    if results.get("corpus"):
+        lines += corpus_bench.report(results["corpus"])
     if results.get("simulator"):
         lines += simulator.report_comparison(results["simulator"])
     sections = (("simulator_stages", "bench-sim-stages.png", simulator.plot_breakdown, simulator.report_breakdown),
@@ -244,6 +248,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="triangle counts for the brute-force detector")
     parser.add_argument("--broad-phase-sizes", type=int, nargs="*", default=[50000, 200000],
                         help="triangle counts for the broad-phase comparison (none to skip it)")
+    parser.add_argument("--corpus", choices=("full", "quick", "skip"), default="full",
+                        help="broad phase on realistic frames (paper scenes, Newton's cloth examples and shirt) "
+                        "against spatial hashing, Newton and ipctk: full (9 frames; about 7 min to simulate them "
+                        "the first time, then cached, and about 2 min to measure on 2 CPU cores), quick (3 early "
+                        "frames, under a minute) or skip")
+    parser.add_argument("--corpus-cache", default=str(corpus.DEFAULT_CACHE_DIR),
+                        help="folder of cached corpus frames (default bench-output/corpus)")
     parser.add_argument("--no-newton", action="store_true",
                         help="skip Newton in the broad-phase and the simulator comparisons")
     parser.add_argument("--simulator", choices=("full", "quick", "skip"), default="full",
@@ -291,6 +302,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.broad_phase_sizes:
             results["broad_phase"] = broad_phase.run(args.broad_phase_sizes, device.alias, args.repeats,
                                                      with_newton=not args.no_newton)
+        if args.corpus != "skip":
+            quick = args.corpus == "quick"
+            with tqdm(desc="broad-phase corpus", unit="frame", leave=False) as bar:
+                results["corpus"] = corpus_bench.run(
+                    corpus.QUICK_CORPUS if quick else corpus.FULL_CORPUS, device.alias,
+                    corpus_bench.QUICK_REPEATS if quick else max(args.repeats, corpus_bench.CORPUS_REPEATS),
+                    with_newton=not args.no_newton, cache_dir=Path(args.corpus_cache), progress=_progress(bar))
     if args.simulator != "skip":
         cases = (simulator.parse_cases(args.simulator_cases) if args.simulator_cases else
                  simulator.QUICK_COMPARISON_CASES if args.simulator == "quick" else simulator.COMPARISON_CASES)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from pscc.bench.corpus import half_mean_edge
 from pscc.collision.detector import CollisionDetector
 from pscc.mesh.generate import folded_sheet
 from pscc.mesh.mesh_data import MeshData
@@ -58,9 +59,7 @@ SCENES = {
 
 def contact_radius(mesh: MeshData) -> float:
     """Half the mean edge length of the mesh's start positions."""
-    a = mesh.vertices[mesh.faces[:, 0]]
-    b = mesh.vertices[mesh.faces[:, 1]]
-    return float(0.5 * np.linalg.norm(a - b, axis=1).mean())
+    return half_mean_edge(mesh.vertices, mesh.faces)
 
 
 PAIRED_REPEATS: int = 15
@@ -78,7 +77,7 @@ def _median(run: Any, repeats: int) -> tuple[float, Any]:
     return statistics.median(times), result
 
 
-def _device_seconds(result: Any) -> float:
+def device_seconds(result: Any) -> float:
     """Seconds of a detect() call up to the narrow phase (every stage but ``output``)."""
     return sum(v for k, v in result.stats["seconds"].items() if k not in ("total", "setup", "output"))
 
@@ -101,7 +100,7 @@ def _paired_medians(run: Any, other: Any, repeats: int) -> tuple[float, Any, flo
         other()
         other_times.append(time.perf_counter() - started)
         ratios.append(times[-1] / other_times[-1])
-        device_ratios.append(_device_seconds(result) / other_times[-1])
+        device_ratios.append(device_seconds(result) / other_times[-1])
     return (statistics.median(times), result, statistics.median(other_times), statistics.median(ratios),
             statistics.median(device_ratios))
 
@@ -143,7 +142,7 @@ def bench_methods(mesh: MeshData, device: str, repeats: int, newton: Any = None)
                 "edge_edge_pairs": pairs[1], "bytes_per_triangle": stats["device_bytes"]["total"] / mesh.face_count,
                 "stage_seconds": {k: v for k, v in stats["seconds"].items() if k not in ("total", "setup")},
             })
-            rows[-1]["device_seconds"] = _device_seconds(result)
+            rows[-1]["device_seconds"] = device_seconds(result)
             rows[-1].update(paired)
     if newton is not None:
         rows.append(newton.row(newton_seconds))
@@ -154,29 +153,37 @@ class NewtonDetection:
     """Newton's TriMeshCollisionDetector on the DCD frame of a scene (refit + vertex-triangle +
     edge-edge queries at pscc's contact radius); :meth:`create` gives None when newton is missing."""
 
-    def __init__(self, mesh: MeshData, device: str) -> None:
+    def __init__(self, faces: np.ndarray, positions: np.ndarray, radius: float, device: str,
+                 vertices: np.ndarray | None = None) -> None:
+        """Build the detector over ``faces`` (a Newton cloth mesh at ``vertices``, default ``positions``)
+        to query ``positions`` at ``radius``."""
         import newton
         from newton._src.geometry.tri_mesh_collision import TriMeshCollisionDetector
 
-        self.radius = contact_radius(mesh)
+        self.radius = float(radius)
         self.device = device
         builder = newton.ModelBuilder()
         builder.add_cloth_mesh(
             pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
-            vertices=[wp.vec3(*v) for v in mesh.vertices.tolist()], indices=mesh.faces.reshape(-1).tolist(),
-            density=0.02, tri_ke=0.0, tri_ka=0.0, tri_kd=0.0,
+            vertices=[wp.vec3(*v) for v in (positions if vertices is None else vertices).tolist()],
+            indices=np.asarray(faces).reshape(-1).tolist(), density=0.02, tri_ke=0.0, tri_ka=0.0, tri_kd=0.0,
         )
         self.model = builder.finalize(device=device)
         self.detector = TriMeshCollisionDetector(model=self.model, init_collision_info=True)
-        self.positions = wp.array(mesh.vertices_end, dtype=wp.vec3, device=device)
+        self.positions = wp.array(positions, dtype=wp.vec3, device=device)
 
     @classmethod
     def create(cls, mesh: MeshData, device: str) -> NewtonDetection | None:
-        """The runner, or None when the ``newton`` package is not installed."""
+        """The runner on the end positions of ``mesh``, or None when the ``newton`` package is not installed."""
         try:
-            return cls(mesh, device)
+            return cls(mesh.faces, mesh.vertices_end, contact_radius(mesh), device, vertices=mesh.vertices)
         except ImportError:
             return None
+
+    def device_bytes(self) -> int:
+        """Bytes of the detector's own Warp arrays (its ``wp.Bvh`` nodes are not counted: a lower bound)."""
+        arrays = [v for v in vars(self.detector).values() if isinstance(v, wp.array)]
+        return int(sum(a.capacity for a in arrays))
 
     def run(self) -> None:
         """One detection: refit, vertex-triangle and edge-edge queries, then a device sync."""

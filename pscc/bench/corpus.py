@@ -1,0 +1,305 @@
+"""A corpus of cloth frames that were not designed for pscc, for the broad-phase comparison (issue 14).
+
+The broad-phase section (:mod:`pscc.bench.broad_phase`) measures generated three-layer folded and
+twisted sheets, which suit PSCC's culling. This corpus holds frames that other code produced:
+
+* ``paper``: pscc's paper scenes (:mod:`pscc.scenes.paper`) at their smallest scale, simulated to a
+  tangled moment: ``twisting`` after the ball has turned past 100 degrees, and the garment scenes
+  (``kungfu``, ``falling``, ``dance``) mid-motion (half their default frame count). Their rest
+  coordinates are the scene's ``rest`` (flat pattern or sheet coordinates); object ids are the
+  scene's cloth pieces.
+* ``newton``: Newton's stock cloth examples (``newton.examples.cloth``), built as shipped with a
+  headless ``ViewerNull`` and stepped on the benchmark's device. The frame is the example model's
+  whole triangle mesh (every cloth mesh it added) at a late frame; the rest coordinates are the
+  positions the example built its model from (``model.particle_q``: the stress-free shape Newton's
+  triangles keep), which for ``cloth_rollers`` is the rolled cloth and its rollers.
+* ``usd``: Newton's shipped ``unisex_shirt.usd`` as shipped (read with ``pxr``); it has no rest.
+
+Each frame has a contact radius for DCD: half the median edge length of its positions
+(:func:`half_median_edge`; the generated sheets of :mod:`pscc.bench.broad_phase` use half the mean,
+which equals it there but which a few long edges would dominate). Simulated frames are cached as ``.npz`` files under a
+cache folder (``bench-output/corpus`` by default), keyed by source, frame and :data:`CACHE_VERSION`,
+so later runs only read them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+__all__ = [
+    "CACHE_VERSION", "DEFAULT_CACHE_DIR", "FULL_CORPUS", "QUICK_CORPUS", "SKIPPED_EXAMPLES", "CorpusFrame",
+    "FrameSpec", "half_mean_edge", "half_median_edge", "load_corpus", "load_frame",
+]
+
+CACHE_VERSION: int = 1
+"""Bumped when a frame recipe changes, so stale cached frames are not reused."""
+
+DEFAULT_CACHE_DIR: Path = Path("bench-output") / "corpus"
+"""Where simulated frames are cached (``make clean`` removes ``bench-output``)."""
+
+
+def half_mean_edge(positions: np.ndarray, faces: np.ndarray) -> float:
+    """Half the mean length of the first edge of every face (the benchmark's DCD contact radius)."""
+    a = positions[faces[:, 0]].astype(np.float64)
+    b = positions[faces[:, 1]].astype(np.float64)
+    return float(0.5 * np.linalg.norm(a - b, axis=1).mean())
+
+
+def half_median_edge(positions: np.ndarray, faces: np.ndarray) -> float:
+    """Half the median length of the mesh's edges (each edge once): the corpus frames' DCD contact radius.
+
+    The median, unlike :func:`half_mean_edge`, ignores a few long edges, such as the 120 cm walls of
+    ``cloth_rollers``' rollers next to its 2.7 x 7 cm cloth cells.
+    """
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edges = np.unique(edges, axis=0)
+    lengths = np.linalg.norm(positions[edges[:, 0]].astype(np.float64) - positions[edges[:, 1]], axis=1)
+    return float(0.5 * np.median(lengths))
+
+
+@dataclass(frozen=True, eq=False)
+class CorpusFrame:
+    """One frame of the corpus.
+
+    Attributes:
+        name: short label, e.g. ``"twisting f48"``.
+        source: where the frame came from, in words (scene, frames, scale, turn angle, file).
+        positions: (n, 3) float32 vertex positions.
+        faces: (m, 3) int32 triangles.
+        rest: (n, 2) or (n, 3) float32 rest (material) coordinates, or None where the source has none.
+        object_ids: (m,) int32 piece of each face, or None for one object.
+        radius: DCD contact radius (:func:`half_median_edge` of the positions).
+    """
+
+    name: str
+    source: str
+    positions: np.ndarray
+    faces: np.ndarray
+    rest: np.ndarray | None
+    object_ids: np.ndarray | None
+    radius: float
+
+    @property
+    def face_count(self) -> int:
+        """Number of triangles."""
+        return int(self.faces.shape[0])
+
+    def save(self, path: Path) -> None:
+        """Write the frame to an ``.npz`` file (:func:`CorpusFrame.load` reads it back)."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        extra = {} if self.rest is None else {"rest": self.rest}
+        if self.object_ids is not None:
+            extra["object_ids"] = self.object_ids
+        np.savez_compressed(path, positions=self.positions, faces=self.faces, name=np.array(self.name),
+                            source=np.array(self.source), **extra)
+
+    @classmethod
+    def load(cls, path: Path) -> CorpusFrame:
+        """Read a frame written by :meth:`save`."""
+        with np.load(path) as data:
+            positions = np.ascontiguousarray(data["positions"], dtype=np.float32)
+            faces = np.ascontiguousarray(data["faces"], dtype=np.int32)
+            rest = np.ascontiguousarray(data["rest"], dtype=np.float32) if "rest" in data else None
+            ids = np.ascontiguousarray(data["object_ids"], dtype=np.int32) if "object_ids" in data else None
+            return cls(str(data["name"]), str(data["source"]), positions, faces, rest, ids,
+                       half_median_edge(positions, faces))
+
+    def without_rest(self) -> CorpusFrame:
+        """The same frame with no rest coordinates."""
+        return CorpusFrame(self.name, self.source, self.positions, self.faces, None, self.object_ids, self.radius)
+
+
+@dataclass(frozen=True)
+class FrameSpec:
+    """A recipe for one corpus frame.
+
+    Attributes:
+        kind: ``"paper"`` (a pscc paper scene), ``"newton"`` (a Newton cloth example) or ``"usd"`` (a
+            shipped USD mesh).
+        name: the paper scene, the example (``twist`` for ``example_cloth_twist``) or the asset file.
+        frames: frames simulated before the frame is taken (0 for a file).
+    """
+
+    kind: str
+    name: str
+    frames: int = 0
+
+    @property
+    def cache_name(self) -> str:
+        """The file name of the cached frame."""
+        return f"{self.kind}-{self.name.replace('.', '_')}-f{self.frames}-v{CACHE_VERSION}.npz"
+
+
+FULL_CORPUS: tuple[FrameSpec, ...] = (
+    # twisting: the ball turns from 1.0 s (frame 25) to 2.5 s; at frame 48 (1.92 s) it has turned 120 degrees.
+    FrameSpec("paper", "twisting", 48),
+    FrameSpec("paper", "kungfu", 42),
+    FrameSpec("paper", "falling", 24),
+    FrameSpec("paper", "dance", 36),
+    # cloth_twist: both ends turn at 60 degrees/s against each other; frame 180 (3 s) is a full turn.
+    FrameSpec("newton", "twist", 180),
+    # cloth_hanging: a sheet pinned along one side swings down and folds.
+    FrameSpec("newton", "hanging", 90),
+    # cloth_rollers: a cloth rolled on one roller (many layers 0.4 cm apart) starts to unroll onto the
+    # other (about 13 s a frame on 2 CPU cores, so only its first frames).
+    FrameSpec("newton", "rollers", 3),
+    # cloth_poker_cards: 52 stiff cards (48 triangles each) falling into a stack on a cube (about 4 s a
+    # frame on 2 CPU cores).
+    FrameSpec("newton", "poker_cards", 15),
+    FrameSpec("usd", "unisex_shirt.usd"),
+)
+"""The ``--corpus full`` frames (about 7 minutes to simulate the first time on 2 CPU cores, then cached)."""
+
+QUICK_CORPUS: tuple[FrameSpec, ...] = (
+    FrameSpec("paper", "dance", 6),
+    FrameSpec("newton", "hanging", 10),
+    FrameSpec("usd", "unisex_shirt.usd"),
+)
+"""The ``--corpus quick`` frames: one of each kind, early frames (under a minute the first time)."""
+
+SKIPPED_EXAMPLES: dict[str, str] = {
+    "style3d": "downloads its garment and avatar assets (newton.utils.download_asset), which needs the network",
+    "franka": "downloads the Franka robot (newton.utils.download_asset), which needs the network",
+    "h1": "downloads the Unitree H1 robot and style3d garments (newton.utils.download_asset), which needs the "
+          "network",
+    "bending": "its cloth (curvedSurface.usd) is 12 triangles: a bending test with nothing to cull",
+}
+"""Newton cloth examples left out of the corpus, and why."""
+
+
+def _paper_frame(spec: FrameSpec, device: str) -> CorpusFrame:
+    from pscc.scenes import paper
+    from pscc.sim.simulation import Simulation
+
+    scale = paper.min_scale(spec.name)
+    scene = paper.PAPER_SCENES[spec.name](scale)
+    sim = Simulation(scene, device=device)
+    for _ in range(spec.frames):
+        sim.step_frame()
+    positions = sim.state.positions.numpy()[: sim.solver.cloth_vertex_count].astype(np.float32)
+    t = spec.frames * scene.frame_time
+    source = f"pscc paper scene `{spec.name}` at scale {scale:.3g}, frame {spec.frames} ({t:.2f} s)"
+    if spec.name == "twisting":
+        rotation, _ = paper._ball_turn(t)
+        source += f", ball turned {math.degrees(math.atan2(rotation[1, 0], rotation[0, 0])):.0f} degrees"
+    faces = np.ascontiguousarray(scene.faces, dtype=np.int32)
+    return CorpusFrame(f"{spec.name} f{spec.frames}", source, positions, faces,
+                       np.ascontiguousarray(scene.rest, dtype=np.float32),
+                       np.ascontiguousarray(scene.object_ids, dtype=np.int32), half_median_edge(positions, faces))
+
+
+def _newton_frame(spec: FrameSpec, device: str) -> CorpusFrame:
+    if spec.name in SKIPPED_EXAMPLES:
+        raise RuntimeError(SKIPPED_EXAMPLES[spec.name])
+    import newton.examples
+    import newton.viewer
+
+    module = importlib.import_module(f"newton.examples.cloth.example_cloth_{spec.name}")
+    example_class = module.Example
+    parser = example_class.create_parser() if hasattr(example_class, "create_parser") else (
+        newton.examples.create_parser())
+    args = parser.parse_args([])
+    with wp.ScopedDevice(device):
+        example = example_class(newton.viewer.ViewerNull(num_frames=spec.frames), args)
+        rest = example.model.particle_q.numpy().astype(np.float32)
+        for _ in range(spec.frames):
+            example.step()
+        positions = example.state_0.particle_q.numpy().astype(np.float32)
+    faces = np.ascontiguousarray(example.model.tri_indices.numpy(), dtype=np.int32)
+    if not np.all(np.isfinite(positions)):
+        raise RuntimeError(f"Newton's cloth_{spec.name} gave non-finite positions after {spec.frames} frames")
+    source = (f"Newton {_newton_version()} example `cloth_{spec.name}` (default arguments, headless), "
+              f"frame {spec.frames}")
+    return CorpusFrame(f"cloth_{spec.name} f{spec.frames}", source, positions, faces, rest, None,
+                       half_median_edge(positions, faces))
+
+
+def _newton_version() -> str:
+    import newton
+
+    return str(getattr(newton, "__version__", "?"))
+
+
+def _usd_frame(spec: FrameSpec) -> CorpusFrame:
+    import newton.examples
+    from pxr import Usd, UsdGeom
+
+    path = newton.examples.get_asset(spec.name)
+    stage = Usd.Stage.Open(path)
+    if stage is None:
+        raise RuntimeError(f"pxr could not open {path}")
+    meshes = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if len(meshes) != 1:
+        raise RuntimeError(f"{path} holds {len(meshes)} meshes; the corpus expects one")
+    mesh = meshes[0]
+    positions = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float32)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int32)
+    faces = _fan_triangles(counts, indices)
+    source = f"Newton's shipped `{spec.name}` (mesh `{mesh.GetPath()}`), as shipped"
+    return CorpusFrame(Path(spec.name).stem, source, positions, faces, None, None, half_median_edge(positions, faces))
+
+
+def _fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Triangles of USD polygons (fan from each polygon's first corner)."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    if np.all(counts == 3):
+        return np.ascontiguousarray(indices.reshape(-1, 3))
+    rows = [(indices[s], indices[s + k], indices[s + k + 1])
+            for s, c in zip(starts, counts, strict=True) for k in range(1, c - 1)]
+    return np.asarray(rows, dtype=np.int32).reshape(-1, 3)
+
+
+def load_frame(spec: FrameSpec, device: str, cache_dir: Path | None = DEFAULT_CACHE_DIR) -> CorpusFrame:
+    """The frame of ``spec``: read from ``cache_dir`` when cached, else produced (and cached).
+
+    Raises:
+        ImportError: ``newton`` (or ``pxr``) is missing for a Newton or USD frame.
+        RuntimeError: the source cannot give the frame (the message says why).
+        ValueError: an unknown ``spec.kind``.
+    """
+    path = None if cache_dir is None else Path(cache_dir) / spec.cache_name
+    if path is not None and path.exists():
+        return CorpusFrame.load(path)
+    if spec.kind == "paper":
+        frame = _paper_frame(spec, device)
+    elif spec.kind == "newton":
+        frame = _newton_frame(spec, device)
+    elif spec.kind == "usd":
+        frame = _usd_frame(spec)
+    else:
+        raise ValueError(f"unknown corpus frame kind {spec.kind!r}; use paper, newton or usd")
+    if path is not None:
+        frame.save(path)
+    return frame
+
+
+def load_corpus(specs: tuple[FrameSpec, ...], device: str, cache_dir: Path | None = DEFAULT_CACHE_DIR,
+                progress: Callable[[str], None] = lambda _: None) -> tuple[list[CorpusFrame], list[dict[str, Any]]]:
+    """Every frame of ``specs`` that its source can give.
+
+    Returns:
+        The frames, and one ``{"spec", "reason"}`` entry per frame left out (a missing package or a
+        source that failed), plus one per example in :data:`SKIPPED_EXAMPLES`.
+    """
+    frames, skipped = [], []
+    for spec in specs:
+        started = time.perf_counter()
+        try:
+            frames.append(load_frame(spec, device, cache_dir))
+        except (ImportError, RuntimeError) as exc:
+            skipped.append({"spec": f"{spec.kind} {spec.name}", "reason": f"{type(exc).__name__}: {exc}"})
+            continue
+        progress(f"{frames[-1].name}: {frames[-1].face_count:,} faces ({time.perf_counter() - started:.1f} s)")
+    for name, reason in SKIPPED_EXAMPLES.items():
+        skipped.append({"spec": f"newton {name}", "reason": reason})
+    return frames, skipped

@@ -1,0 +1,103 @@
+"""The realistic broad-phase corpus and its side-by-side section (issue 14), on small cases."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pscc.bench import broad_phase, corpus, corpus_bench
+
+SHIRT = corpus.FrameSpec("usd", "unisex_shirt.usd")
+
+
+def _twisted_frame(triangles: int) -> corpus.CorpusFrame:
+    """A generated frame with rest coordinates (the corpus's own frames need a simulation)."""
+    mesh = broad_phase.SCENES["twisted"](triangles)
+    return corpus.CorpusFrame("twisted", "generated", mesh.vertices_end, mesh.faces, mesh.rest, None,
+                              corpus.half_median_edge(mesh.vertices_end, mesh.faces))
+
+
+def test_frames_round_trip_through_the_cache(tmp_path: Path) -> None:
+    frame = _twisted_frame(600)
+    path = tmp_path / "frame.npz"
+    frame.save(path)
+    loaded = corpus.CorpusFrame.load(path)
+    assert loaded.name == frame.name and loaded.source == frame.source
+    np.testing.assert_array_equal(loaded.positions, frame.positions)
+    np.testing.assert_array_equal(loaded.faces, frame.faces)
+    np.testing.assert_array_equal(loaded.rest, frame.rest)
+    assert loaded.object_ids is None and loaded.radius == pytest.approx(frame.radius)
+    assert frame.without_rest().rest is None
+
+
+def test_half_median_edge_ignores_a_few_long_edges() -> None:
+    positions = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [100, 0, 0]], dtype=np.float32)
+    faces = np.array([[0, 1, 2], [1, 3, 2], [1, 4, 3]])
+    # Edges 1, 1, 1, 1, sqrt 2, 99 and about 99: the median is 1 (the mean is about 29).
+    assert corpus.half_median_edge(positions, faces) == pytest.approx(0.5)
+
+
+def test_fan_triangles_split_polygons() -> None:
+    faces = corpus._fan_triangles(np.array([3, 4]), np.array([0, 1, 2, 3, 4, 5, 6]))
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [3, 4, 5], [3, 5, 6]])
+
+
+def test_unknown_kind_and_skipped_examples_say_why(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown corpus frame kind"):
+        corpus.load_frame(corpus.FrameSpec("obj", "x"), "cpu", tmp_path)
+    frames, skipped = corpus.load_corpus((corpus.FrameSpec("newton", "style3d", 5),), "cpu", tmp_path)
+    assert frames == []
+    assert any(s["spec"] == "newton style3d" and "network" in s["reason"] for s in skipped)
+
+
+def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
+    result = corpus_bench.bench_frame(_twisted_frame(2000), "cpu", repeats=1, with_newton=False, with_ipctk=False)
+    methods = [r["method"] for r in result["rows"]]
+    assert methods == ["pscc", "pscc-no-rest", "spatial-hash"]
+    rows = {r["method"]: r for r in result["rows"]}
+    assert rows["spatial-hash"]["triangle_pairs"] > 0
+    for name in ("pscc", "pscc-no-rest"):
+        # DCD: pscc returns a subset of the exact pairs (pairs inside one front node are culled).
+        assert result["ratios"][name]["subset_of_spatial_hash"]
+        assert 0.0 < result["ratios"][name]["found_vs_spatial_hash"] <= 1.0
+        assert 0 < rows[name]["triangle_pairs"] <= rows["spatial-hash"]["triangle_pairs"]
+        assert rows[name]["vertex_face_pairs"] + rows[name]["edge_edge_pairs"] > 0
+        assert result["ratios"][name]["time_vs_spatial-hash"] > 0
+
+
+def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
+    pytest.importorskip("newton", reason="the shirt ships with newton (a bench extra)")
+    pytest.importorskip("ipctk", reason="ipctk is a test extra")
+    import ipctk
+
+    results = corpus_bench.run((SHIRT,), "cpu", repeats=1, cache_dir=tmp_path)
+    assert (tmp_path / SHIRT.cache_name).exists()
+    (entry,) = results["frames"]
+    assert entry["faces"] == 12736 and not entry["rest"] and entry["missing"] == []
+    rows = {r["method"]: r for r in entry["rows"]}
+    assert list(rows) == ["pscc-no-rest", "spatial-hash", "newton", "ipctk-lbvh-1", "ipctk-lbvh-2"]
+    pscc, spatial = rows["pscc-no-rest"], rows["spatial-hash"]
+    assert entry["ratios"]["pscc-no-rest"]["subset_of_spatial_hash"]
+    assert 0 < pscc["triangle_pairs"] <= spatial["triangle_pairs"]
+    assert pscc["vertex_face_pairs"] > 0 and pscc["edge_edge_pairs"] > 0
+    assert rows["ipctk-lbvh-1"]["candidate_pairs"] == rows["ipctk-lbvh-2"]["candidate_pairs"] > 0
+    assert rows["newton"]["vertex_face_pairs"] > 0
+    for key in ("time_vs_newton", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2", "device_vs_newton"):
+        assert entry["ratios"]["pscc-no-rest"][key] > 0
+    # Every pair pscc reports is an ipctk candidate: the two radius conventions agree.
+    frame = corpus.CorpusFrame.load(tmp_path / SHIRT.cache_name)
+    runner = corpus_bench.IpctkLbvh(frame, 1)
+    candidates = runner.run()
+    detector = corpus_bench._PsccRunner(frame, "pscc", None, "cpu")
+    found = detector.run()
+    vertex_face = {(c.vertex_id, c.face_id) for c in candidates.fv_candidates}
+    assert {(int(v), int(f)) for v, f in found.vertex_face} <= vertex_face
+    edges = np.asarray(ipctk.edges(frame.faces))
+    edge_edge = {tuple(sorted((tuple(sorted(edges[c.edge0_id])), tuple(sorted(edges[c.edge1_id])))))
+                 for c in candidates.ee_candidates}
+    assert {((int(a0), int(a1)), (int(b0), int(b1))) for a0, a1, b0, b1 in found.edge_edge} <= edge_edge
+    text = "\n".join(corpus_bench.report(results))
+    assert "| unisex_shirt | 12,736 | pscc (no rest) |" in text and "Targets met:" in text
+    assert "left out: newton style3d" in text
