@@ -15,9 +15,11 @@ twisted sheets, which suit PSCC's culling. This corpus holds frames that other c
   triangles keep), which for ``cloth_rollers`` is the rolled cloth and its rollers.
 * ``usd``: Newton's shipped ``unisex_shirt.usd`` as shipped (read with ``pxr``); it has no rest.
 
-Each frame has a contact radius for DCD: half the median edge length of its positions
-(:func:`half_median_edge`; the generated sheets of :mod:`pscc.bench.broad_phase` use half the mean,
-which equals it there but which a few long edges would dominate). Simulated frames are cached as ``.npz`` files under a
+Each frame runs DCD at its own contact radius (:func:`own_contact_radius`): a paper scene's cloth
+thickness, a Newton example's self-contact margin; a shipped file, which has none, at half the median
+edge length of its positions (:func:`half_median_edge`; the generated sheets of
+:mod:`pscc.bench.broad_phase` use half the mean, which equals it there but which a few long edges would
+dominate). Simulated frames are cached as ``.npz`` files under a
 cache folder (``bench-output/corpus`` by default), keyed by source, frame and :data:`CACHE_VERSION`,
 so later runs only read them.
 """
@@ -28,7 +30,7 @@ import importlib
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +39,8 @@ import warp as wp
 
 __all__ = [
     "CACHE_VERSION", "DEFAULT_CACHE_DIR", "FULL_CORPUS", "QUICK_CORPUS", "SKIPPED_EXAMPLES", "CorpusFrame",
-    "FrameSpec", "half_mean_edge", "half_median_edge", "load_corpus", "load_frame",
+    "FrameSpec", "NEWTON_CONTACT_MARGINS", "half_mean_edge", "half_median_edge", "load_corpus", "load_frame",
+    "own_contact_radius",
 ]
 
 CACHE_VERSION: int = 1
@@ -77,7 +80,7 @@ class CorpusFrame:
         faces: (m, 3) int32 triangles.
         rest: (n, 2) or (n, 3) float32 rest (material) coordinates, or None where the source has none.
         object_ids: (m,) int32 piece of each face, or None for one object.
-        radius: DCD contact radius (:func:`half_median_edge` of the positions).
+        radius: DCD contact radius (:func:`own_contact_radius`, else :func:`half_median_edge` of the positions).
     """
 
     name: str
@@ -269,7 +272,7 @@ def load_frame(spec: FrameSpec, device: str, cache_dir: Path | None = DEFAULT_CA
     """
     path = None if cache_dir is None else Path(cache_dir) / spec.cache_name
     if path is not None and path.exists():
-        return CorpusFrame.load(path)
+        return _with_own_radius(spec, CorpusFrame.load(path))
     if spec.kind == "paper":
         frame = _paper_frame(spec, device)
     elif spec.kind == "newton":
@@ -280,7 +283,37 @@ def load_frame(spec: FrameSpec, device: str, cache_dir: Path | None = DEFAULT_CA
         raise ValueError(f"unknown corpus frame kind {spec.kind!r}; use paper, newton or usd")
     if path is not None:
         frame.save(path)
-    return frame
+    return _with_own_radius(spec, frame)
+
+
+NEWTON_CONTACT_MARGINS: dict[str, float] = {"twist": 0.002, "hanging": 0.02, "rollers": 0.3, "poker_cards": 0.001}
+"""Each Newton example's own self-contact radius: the ``particle_self_contact_margin`` it gives its VBD
+solver (in the example's units; ``cloth_rollers`` works in centimetres)."""
+
+
+def own_contact_radius(spec: FrameSpec) -> tuple[float | None, str]:
+    """The contact radius the frame's own simulator uses, and where it comes from; ``None`` when it has none.
+
+    A paper scene's is its solver thickness (the DCD radius of pscc's own contact springs); a Newton
+    example's is its self-contact margin (:data:`NEWTON_CONTACT_MARGINS`); a shipped file has none.
+    """
+    if spec.kind == "paper":
+        from pscc.scenes import paper
+
+        scene = paper.PAPER_SCENES[spec.name](paper.min_scale(spec.name))
+        materials = scene.material if isinstance(scene.material, list) else [scene.material]
+        return float(max(m.thickness for m in materials)), "the scene's cloth thickness"
+    if spec.kind == "newton" and spec.name in NEWTON_CONTACT_MARGINS:
+        return NEWTON_CONTACT_MARGINS[spec.name], "the example's particle_self_contact_margin"
+    return None, "half its median edge length (it has no contact radius of its own)"
+
+
+def _with_own_radius(spec: FrameSpec, frame: CorpusFrame) -> CorpusFrame:
+    """``frame`` with its own contact radius where its source has one (:func:`own_contact_radius`)."""
+    radius, origin = own_contact_radius(spec)
+    if radius is None:
+        return replace(frame, source=f"{frame.source}; contact radius: {origin}")
+    return replace(frame, radius=radius, source=f"{frame.source}; contact radius: {origin}")
 
 
 def load_corpus(specs: tuple[FrameSpec, ...], device: str, cache_dir: Path | None = DEFAULT_CACHE_DIR,

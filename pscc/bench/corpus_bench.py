@@ -256,7 +256,9 @@ def report(results: dict[str, Any]) -> list[str]:
         "",
         "Frames that were not designed for pscc (`pscc/bench/corpus.py`): pscc's paper scenes simulated to",
         "tangled moments (smallest scale), Newton's stock cloth examples run headless to a late frame, and",
-        "Newton's shipped `unisex_shirt.usd`. DCD at each frame's contact radius (half its median edge length).",
+        "Newton's shipped `unisex_shirt.usd`. DCD at each frame's own contact radius: a paper scene's cloth "
+        "thickness, a Newton example's self-contact margin, half the median edge length for the shirt (no "
+        "radius of its own).",
         "`pscc (rest)` builds its BVH over the frame's rest coordinates, `pscc (no rest)` over the frame's",
         "own shape embedded by distance along the surface (`pscc/collision/intrinsic.py`). `newton`:",
         "`TriMeshCollisionDetector` (refit, vertex-triangle and edge-edge queries);",
