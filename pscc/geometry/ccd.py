@@ -27,6 +27,9 @@ motion of F over the step (|F(t)| >= |F(0)| - max |F(1) - F(0)|, the maximum tak
 the (u, v) domain). Resting and slowly moving pairs, the grazing queries that cost the search the most
 boxes, end here.
 
+**Plane filter** (minimum distance > 0). Then a pair is excluded when its first feature provably stays
+farther than ``d_min`` from the moving plane of the second (:func:`plane_keeps_distance`, docs/ccd.md).
+
 **Search.** A depth-first search over (t, u, v) boxes with a fixed per-thread stack. A box is
 *excluded* when the bounding box of its corner values, grown by the rounding bound ``err``, stays
 farther than ``d_min`` from the origin (Euclidean). Boxes are split along the parameter whose
@@ -78,6 +81,7 @@ class CcdParameters:
     max_boxes: wp.int32
     coplanarity_factor: wp.float32
     toi_tolerance: wp.float32
+    plane_filter: wp.int32
 
 
 def ccd_parameters() -> CcdParameters:
@@ -90,6 +94,7 @@ def ccd_parameters() -> CcdParameters:
     params.max_boxes = tolerances.CCD_MAX_BOXES
     params.coplanarity_factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
     params.toi_tolerance = tolerances.CCD_TOI_TOLERANCE
+    params.plane_filter = 1
     return params
 
 
@@ -216,6 +221,55 @@ def coplanarity_sign(
     if s2 != s0:
         return 0.0
     return s0
+
+
+@wp.func
+def _beyond(value: float, threshold: float, magnitude: float, factor: float, side: float) -> bool:
+    """Whether ``side * value`` provably exceeds ``threshold`` (>= 0) despite ``value``'s rounding
+    (``factor x magnitude``) and the one rounding of the comparison's subtraction."""
+    return side * value - threshold * (1.0 + _MOTION_MARGIN) > factor * magnitude * (1.0 + _MOTION_MARGIN)
+
+
+@wp.func
+def plane_keeps_distance(
+    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, distance: float,
+    factor: float,
+) -> bool:
+    """True when q(t) stays farther than ``distance`` from the moving plane spanned by e1(t) and e2(t)
+    over the whole step (the deforming non-penetration filter of Tang et al. 2010, with a distance).
+
+    The plane's distance is (n . q) / |n| with n(t) = e1(t) x e2(t), a quadratic whose Bernstein control
+    points are n0, nX, n1, so |n(t)| <= N = max(|n0|, |nX|, |n1|) (each grown by its rounding bound);
+    n . q is the cubic of :func:`coplanarity_sign` with Bernstein coefficients k0..k3. If every k_i
+    exceeds ``distance x N`` with one sign, then |n . q| > distance |n| for every t in [0, 1]. The point
+    (vertex-face) or the line (edge-edge) then stays farther than ``distance`` from the plane holding the
+    triangle (the other line), so from the triangle (the other edge). Each k_i is trusted beyond
+    ``factor x`` its magnitude companion, as in :func:`coplanarity_sign`.
+    """
+    de1 = e11 - e10
+    de2 = e21 - e20
+    n0 = wp.cross(e10, e20)
+    n1 = wp.cross(e11, e21)
+    nx = 0.5 * ((n0 + n1) - wp.cross(de1, de2))
+    m0 = _abs_cross(e10, e20)
+    m1 = _abs_cross(e11, e21)
+    mx = 0.5 * ((m0 + m1) + _abs_cross(de1, de2))
+    normal_bound = wp.max(wp.length(n0) + factor * wp.length(m0),
+                          wp.max(wp.length(nx) + factor * wp.length(mx), wp.length(n1) + factor * wp.length(m1)))
+    reach = distance * normal_bound * (1.0 + _MOTION_MARGIN)
+    value0 = wp.dot(n0, q0)
+    side = float(1.0)
+    if value0 < 0.0:
+        side = -1.0
+    if not _beyond(value0, reach, _abs_dot(m0, q0), factor, side):
+        return False
+    if not _beyond(wp.dot(n1, q1), reach, _abs_dot(m1, q1), factor, side):
+        return False
+    if not _beyond(2.0 * wp.dot(nx, q0) + wp.dot(n0, q1), 3.0 * reach, 2.0 * _abs_dot(mx, q0) + _abs_dot(m0, q1),
+                   factor, side):
+        return False
+    return _beyond(2.0 * wp.dot(nx, q1) + wp.dot(n1, q0), 3.0 * reach, 2.0 * _abs_dot(mx, q1) + _abs_dot(m1, q0),
+                   factor, side)
 
 
 @wp.func
@@ -565,6 +619,12 @@ def _ccd_from_differences(
     if minimum_distance == 0.0 and extra_error == 0.0:
         if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
             return 2.0
+    elif params.plane_filter != 0:
+        # F_exact differs from F evaluated on the float inputs by at most |err| (twice, as in the motion bound).
+        if plane_keeps_distance(q0, e10, e20, q1, e11, e21,
+                                minimum_distance * (1.0 + _MOTION_MARGIN) + 2.0 * wp.length(err),
+                                params.coplanarity_factor):
+            return 2.0
     return _ccd_search(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance, params)
 
 
@@ -729,7 +789,8 @@ def input_rounding_error(points_t0: np.ndarray, points_t1: np.ndarray) -> np.nda
     return error
 
 
-def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device) -> tuple[np.ndarray, np.ndarray]:
+def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device,
+             plane_filter: bool = True) -> tuple[np.ndarray, np.ndarray]:
     raw_t0 = np.asarray(points_t0.numpy() if isinstance(points_t0, wp.array) else points_t0)
     raw_t1 = np.asarray(points_t1.numpy() if isinstance(points_t1, wp.array) else points_t1)
     x0 = check_points(raw_t0, "points_t0", shape_tail=(4, 3))
@@ -746,6 +807,8 @@ def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device) -> tuple[np
     extra = input_rounding_error(raw_t0, raw_t1)
     device = wp.get_device(device)
     toi = wp.empty(count, dtype=wp.float32, device=device)
+    params = ccd_parameters()
+    params.plane_filter = int(bool(plane_filter))
     wp.launch(
         kernel,
         dim=count,
@@ -754,7 +817,7 @@ def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device) -> tuple[np
             wp.array(x1, dtype=wp.vec3, device=device),
             wp.array(extra, dtype=wp.float32, device=device),
             float(distance),
-            ccd_parameters(),
+            params,
         ],
         outputs=[toi],
         device=device,
@@ -770,6 +833,7 @@ def vertex_face_ccd(
     minimum_distance: float = 0.0,
     *,
     device: str | None = None,
+    plane_filter: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched conservative vertex-face CCD.
 
@@ -779,6 +843,9 @@ def vertex_face_ccd(
         minimum_distance: report the pair when the vertex comes within this Euclidean distance of
             the triangle (0 = touching), in the units of the points.
         device: Warp device to run on (default: Warp's default device).
+        plane_filter: exclude pairs whose features provably stay farther than ``minimum_distance`` from
+            each other's moving plane before the search (:func:`plane_keeps_distance`; False: the
+            search decides every pair, for comparisons).
 
     Returns:
         ``(hit, toi)``: (n,) bool and (n,) float32. ``toi`` is a lower bound of the first time of
@@ -787,7 +854,7 @@ def vertex_face_ccd(
     Raises:
         InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
     """
-    return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device)
+    return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter)
 
 
 def edge_edge_ccd(
@@ -796,6 +863,7 @@ def edge_edge_ccd(
     minimum_distance: float = 0.0,
     *,
     device: str | None = None,
+    plane_filter: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched conservative edge-edge CCD.
 
@@ -804,6 +872,7 @@ def edge_edge_ccd(
         points_t1: (n, 4, 3) positions at t = 1, same order.
         minimum_distance: Euclidean distance at which the edges count as colliding (0 = touching).
         device: Warp device to run on.
+        plane_filter: as in :func:`vertex_face_ccd`.
 
     Returns:
         ``(hit, toi)`` as in :func:`vertex_face_ccd`.
@@ -811,4 +880,4 @@ def edge_edge_ccd(
     Raises:
         InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
     """
-    return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device)
+    return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter)
