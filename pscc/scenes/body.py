@@ -1,20 +1,14 @@
-"""A procedural, articulated humanoid for the garment benchmarks (``kungfu``, ``falling``, ``dance``).
+"""A procedural, articulated humanoid skeleton for the garment benchmarks (``kungfu``, ``falling``, ``dance``).
 
 The body is a small joint hierarchy (forward kinematics) carrying rigid parts. Every part is a
 *sphere-swept core*: the set of points within ``radius`` of a segment (a capsule: limbs, pelvis,
-head) or of a rectangle (a rounded slab: the torso). Each part becomes one
-:class:`pscc.sim.obstacles.Obstacle` (a closed triangle mesh) whose rigid motion is its joint's
-world transform.
+head) or of a rectangle (a rounded slab: the torso). The parts are the shape the garment scenes'
+mannequin is built from (:func:`pscc.scenes.mannequin.mannequin`: their smooth union, bridged at the
+joints, skinned to the joints' motions); the garments are fitted to them and anchored to their joints.
 
-**The parts never touch.** Overlapping parts would close every joint into a crease where cloth is
-pinched between two differently moving obstacles (the solver then halves its steps or gives up), and
-an independent intersection oracle run on the whole collision mesh (ipctk's ``has_intersections``,
-as the tests do) would report the overlaps. Each child limb therefore hangs on a *ball joint*: its
-first end is a sphere centred on the joint pivot, and the parent stays at least :data:`JOINT_GAP`
-away from it, so rotating the child about its pivot keeps the gap as long as the limb does not swing
-back into its parent (hips below horizontal, knees and elbows bent at most about 90 degrees).
-:meth:`Body.min_gaps` measures the gaps of an animation; the tests check them for every garment
-scene.
+Each child limb hangs on a *ball joint*: its first end is a sphere centred on the joint pivot, and the
+parent stops :data:`JOINT_GAP` short of it, so the parts themselves never overlap in the rest pose
+(the mannequin's smooth union closes the gaps).
 
 Coordinates (metres): z up, the body faces +y, its left side is +x. In the rest pose (the pose at
 t = 0 of every animation here) the body stands with the feet 0.04 m above z = 0, legs slightly
@@ -38,7 +32,6 @@ import numpy as np
 
 from pscc.errors import InputError
 from pscc.sim.obstacles import (
-    Obstacle,
     Transform,
     quaternion_from_rotation_vector,
     quaternion_matrix,
@@ -53,8 +46,8 @@ TranslationTrack = Callable[[float], np.ndarray]
 """The root's translation over time: ``t [s] -> (3,)`` [m]."""
 
 JOINT_GAP: float = 0.012
-"""Gap [m] between a limb's ball-joint sphere and its parent part in the rest pose (at least 1 cm, so
-cloth caught in a joint always has room for its two contact distances of 2 mm)."""
+"""Gap [m] between a limb's ball-joint sphere and its parent part in the rest pose (the mannequin's
+bridges and smooth union close it)."""
 
 
 # ---------------------------------------------------------------------------------------------- motion
@@ -144,18 +137,6 @@ def spin(axis: Sequence[float], turns: float, start: float, duration: float) -> 
 
     def track(t: float) -> np.ndarray:
         return rotation_from_axis_angle(direction * total * smoothstep((float(t) - start) / duration))
-
-    return track
-
-
-def compose(*tracks: RotationTrack) -> RotationTrack:
-    """The rotation track ``t -> tracks[0](t) @ tracks[1](t) @ ...`` (the last one acts first)."""
-
-    def track(t: float) -> np.ndarray:
-        rotation = np.eye(3)
-        for item in tracks:
-            rotation = rotation @ item(t)
-        return rotation
 
     return track
 
@@ -279,18 +260,6 @@ def core_distance(points: np.ndarray, core: np.ndarray) -> np.ndarray:
     s = np.clip(rel @ e1 / (e1 @ e1), 0.0, 1.0)
     u = np.clip(rel @ e2 / (e2 @ e2), 0.0, 1.0)
     return np.linalg.norm(rel - s[:, None] * e1 - u[:, None] * e2, axis=1)
-
-
-def _core_samples(core: np.ndarray, spacing: float) -> np.ndarray:
-    if core.shape[0] == 2:
-        n = max(2, math.ceil(np.linalg.norm(core[1] - core[0]) / spacing) + 1)
-        s = np.linspace(0.0, 1.0, n)[:, None]
-        return core[0] + s * (core[1] - core[0])
-    e1, e2 = core[1] - core[0], core[3] - core[0]
-    n1 = max(2, math.ceil(np.linalg.norm(e1) / spacing) + 1)
-    n2 = max(2, math.ceil(np.linalg.norm(e2) / spacing) + 1)
-    s, u = np.meshgrid(np.linspace(0.0, 1.0, n1), np.linspace(0.0, 1.0, n2))
-    return core[0] + s.reshape(-1, 1) * e1 + u.reshape(-1, 1) * e2
 
 
 # ---------------------------------------------------------------------------------------------- body
@@ -428,14 +397,6 @@ class Body:
 
         return motion
 
-    def obstacles(self, around: int = 24, rings: int = 8) -> list[Obstacle]:
-        """One obstacle per part: its closed rest mesh and its joint's motion."""
-        out = []
-        for part in self.parts.values():
-            vertices, faces = part.mesh(around, rings)
-            out.append(Obstacle(vertices, faces, motion=self.motion(part.name), name=part.name))
-        return out
-
     def surface_distance(self, points: np.ndarray, t: float) -> dict[str, np.ndarray]:
         """Signed distances [m] of world points (n, 3) at time ``t`` to each part's exact surface."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -444,30 +405,6 @@ class Body:
             rotation, translation = self.transform(name, t)
             out[name] = part.surface_distance((points - translation) @ rotation)
         return out
-
-    def min_gaps(self, times: Sequence[float], spacing: float = 0.005) -> dict[tuple[str, str], float]:
-        """Smallest gap [m] between the surfaces of every pair of parts over ``times`` [s].
-
-        Cores are sampled at most ``spacing`` apart; each value is a lower bound (the sampled gap
-        minus the farthest a core point can be from its nearest sample). Negative means the parts
-        overlap.
-        """
-        names = list(self.parts)
-        samples = {n: _core_samples(np.asarray(self.parts[n].core, np.float64), spacing) for n in names}
-        slack = {n: spacing * (0.5 if self.parts[n].core.shape[0] == 2 else math.sqrt(0.5)) for n in names}
-        gaps = {(a, b): math.inf for i, a in enumerate(names) for b in names[i + 1:]}
-        for t in times:
-            world = {}
-            for name in names:
-                rotation, translation = self.transform(name, t)
-                world[name] = samples[name] @ rotation.T + translation
-            for a, b in gaps:
-                rotation, translation = self.transform(b, t)
-                local = (world[a] - translation) @ rotation
-                gap = float(core_distance(local, self.parts[b].core).min()) - self.parts[a].radius \
-                    - self.parts[b].radius - slack[a]
-                gaps[a, b] = min(gaps[a, b], gap)
-        return gaps
 
     def descendants(self, joint: str) -> set[str]:
         """Names of ``joint`` and every joint below it."""
