@@ -219,6 +219,7 @@ class ClothSolver:
         extent = vertices.max(axis=0) - vertices.min(axis=0)
         self._scale = float(np.linalg.norm(extent))
         self._scratch: dict[int, ClothState] = {}
+        self._near_off = False  # a rejected step is retried without the proximity constraints (_advance)
         self._device_step: DeviceStep | None = None
         self._frame_graph: tuple[tuple[Any, ...], Any] | None = None
         self._frame_graph_warm: tuple[Any, ...] | None = None
@@ -791,6 +792,15 @@ class ClothSolver:
         try:
             self._attempt(state_in, state_out, t, dt, stats)
         except _StepRejected as why:
+            if self.contact.proximity_constraints and not self._near_off:
+                # The proximity constraints may leave no room for a response (a vertex pressed between a
+                # collision and a layer it touches): the same step again without them, before any halving.
+                self._near_off = True
+                try:
+                    self._advance(state_in, state_out, t, dt, depth, stats)
+                finally:
+                    self._near_off = False
+                return
             if depth >= self.contact.max_step_halvings:
                 if self.initial_crossings:
                     fix = (f"the initial state has {self.initial_crossings} edge-face crossings, let through by "
@@ -896,7 +906,7 @@ class ClothSolver:
                 # positions_t1 holds x1 here: the integrator's end positions or the last projection.
                 self.projection.add(vertex_face, result.vertex_face_toi, result.edge_edge, result.edge_edge_toi,
                                     positions_t0, positions_t1)
-                if rounds == 1 and self.contact.proximity_constraints:
+                if rounds == 1 and self.contact.proximity_constraints and not self._near_off:
                     # The pairs already in contact may not be pushed closer (the next round's collisions).
                     self.projection.add_near(springs, positions_t1, self.separation)
                 solved = self.projection.solve(positions_t1, self.separation, tolerance)

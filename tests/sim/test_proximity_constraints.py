@@ -127,3 +127,26 @@ def test_the_device_path_adds_them_in_the_first_round_like_the_host_path(tmp_pat
     assert record["counts"]["projection_rounds"] == counts["projection_rounds"] == 1
     assert record["counts"]["ccd_rounds"] == counts["ccd_rounds"]
     np.testing.assert_allclose(state.positions.numpy(), x_host, atol=1e-6)
+
+
+def test_a_step_rejected_with_them_is_redone_without_them_before_halving(tmp_path: Path, monkeypatch) -> None:
+    """If the constraints leave the response no room (here forced: every attempt that uses them is rejected),
+    the same step runs again without them, with no halving, and ends where a run without them ends."""
+    import pscc.sim.solver as solver_module
+
+    _, x_without, _ = _drop_onto_resting_layer(tmp_path, near=False)
+    attempts: list[bool] = []
+    original = solver_module.ClothSolver._attempt
+
+    def attempt(self, state_in, state_out, t, dt, stats):
+        uses_them = self.contact.proximity_constraints and not self._near_off
+        attempts.append(uses_them)
+        if uses_them:
+            raise solver_module._StepRejected("forced: no room for the response")
+        return original(self, state_in, state_out, t, dt, stats)
+
+    monkeypatch.setattr(solver_module.ClothSolver, "_attempt", attempt)
+    counts, x, solver = _drop_onto_resting_layer(tmp_path, near=True)
+    assert attempts.count(True) == 2 and attempts.count(False) == 2  # each of the two steps: once with, once without
+    assert counts["halvings"] == 0 and not solver._near_off
+    np.testing.assert_array_equal(x, x_without)
