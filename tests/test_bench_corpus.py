@@ -65,6 +65,10 @@ def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
         assert 0 < rows[name]["triangle_pairs"] <= rows["spatial-hash"]["triangle_pairs"]
         assert rows[name]["vertex_face_pairs"] + rows[name]["edge_edge_pairs"] > 0
         assert result["ratios"][name]["time_vs_spatial-hash"] > 0
+        assert result["ratios"][name]["host_vs_spatial-hash"] > 0
+    for row in rows.values():
+        # The recorded graph replays the detection: the same rows as the host call, every time.
+        assert row["graph_matches"] and row["graph_seconds"] > 0
 
 
 def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
@@ -83,8 +87,9 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     assert 0 < pscc["triangle_pairs"] <= spatial["triangle_pairs"]
     assert pscc["vertex_face_pairs"] > 0 and pscc["edge_edge_pairs"] > 0
     assert rows["ipctk-lbvh-1"]["candidate_pairs"] == rows["ipctk-lbvh-2"]["candidate_pairs"] > 0
-    assert rows["newton"]["vertex_face_pairs"] > 0
-    for key in ("time_vs_newton", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2", "device_vs_newton"):
+    assert rows["newton"]["vertex_face_pairs"] > 0 and rows["newton"]["graph_seconds"] > 0
+    assert pscc["graph_matches"] and spatial["graph_matches"]
+    for key in ("time_vs_newton", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2", "host_vs_newton"):
         assert entry["ratios"]["pscc-no-rest"][key] > 0
     # Every pair pscc reports is an ipctk candidate: the two radius conventions agree.
     frame = corpus.CorpusFrame.load(tmp_path / SHIRT.cache_name)

@@ -16,9 +16,16 @@ section runs DCD at the frame's contact radius with:
 
 The methods alternate within each repeat (the order rotates by one every repeat) in one process,
 so all of them see the same machine load; a time ratio is the median of the per-repeat ratios of
-two calls made in the same repeat. pscc's rows are whole ``detect()`` calls (broad phase, narrow
-phase and the sorted host output); ``device seconds`` leaves out the output stage, as Newton's
-detector keeps its results on the device. ipctk's rows are its broad phase only (no distance tests).
+two calls made in the same repeat.
+
+The Warp detectors are timed two ways. *Call*: pscc's host ``detect()`` (upload, broad and narrow
+phase, the sorted host rows) and Newton's eager launches. *Graph*: the device-array ``detect()``
+recorded once with ``wp.ScopedCapture`` and replayed (pscc's replay is followed by
+``check_capacity()``, the counter read a caller needs before trusting the result; Newton's by a sync),
+which is how pscc's simulator runs detection: device arrays in and out, one recorded graph. pscc's
+replay is checked to give the host call's rows. The target ratios compare pscc's replay with the
+faster of the other method's call and replay; ipctk's rows are its broad phase only (no distance
+tests) in C++, with nothing to replay.
 """
 
 from __future__ import annotations
@@ -30,8 +37,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import warp as wp
 
-from pscc.bench.broad_phase import NewtonDetection, device_seconds
+from pscc.bench.broad_phase import NewtonDetection
 from pscc.bench.corpus import DEFAULT_CACHE_DIR, CorpusFrame, FrameSpec, load_corpus
 from pscc.collision.detector import CollisionDetector
 
@@ -63,8 +71,28 @@ class _PsccRunner:
                                           device=device)
 
     def run(self) -> Any:
-        """One ``detect()`` call at the frame's contact radius."""
+        """One ``detect()`` call at the frame's contact radius (host arrays in, sorted host rows out)."""
         return self.detector.detect(self.frame.positions, thickness=self.frame.radius)
+
+    def record(self) -> None:
+        """Record the device-array ``detect()`` (broad and narrow phase, results on the device) into a
+        graph, after one eager call that prepares the structures and sizes the buffers."""
+        self.positions = wp.array(self.frame.positions, dtype=wp.vec3, device=self.detector.device)
+        self.detector.detect(self.positions, thickness=self.frame.radius)
+        with wp.ScopedCapture(device=self.detector.device) as capture:
+            self.contacts = self.detector.detect(self.positions, thickness=self.frame.radius)
+        self.graph = capture.graph
+
+    def replay(self) -> None:
+        """One replay of the recorded graph, then the counter read a caller needs to trust it
+        (:meth:`CollisionDetector.check_capacity`, the device path's one sync point)."""
+        wp.capture_launch(self.graph)
+        if not self.detector.check_capacity():
+            raise RuntimeError(f"{self.frame.name}: a buffer overflowed in a graph replay of unchanged positions")
+
+    def replayed(self) -> Any:
+        """The sorted host rows of the last replay (:meth:`CollisionDetector.collect`)."""
+        return self.detector.collect(self.contacts)
 
     def row(self, result: Any) -> dict[str, Any]:
         """Counts and memory of ``result``."""
@@ -86,6 +114,20 @@ class _NewtonRunner:
     def run(self) -> None:
         """One detection (refit and both queries, then a sync)."""
         self.detection.run()
+
+    def record(self) -> None:
+        """Record refit and both queries into a graph (after the warm-up call)."""
+        detector = self.detection.detector
+        with wp.ScopedCapture(device=self.detection.device) as capture:
+            detector.refit(self.detection.positions)
+            detector.vertex_triangle_collision_detection(self.detection.radius)
+            detector.edge_edge_collision_detection(self.detection.radius)
+        self.graph = capture.graph
+
+    def replay(self) -> None:
+        """One replay of the recorded graph, then a sync."""
+        wp.capture_launch(self.graph)
+        wp.synchronize_device(self.detection.device)
 
     def row(self, _: Any) -> dict[str, Any]:
         """Pairs found (and whether a buffer overflowed) and the detector's array bytes."""
@@ -147,26 +189,45 @@ def _runners(frame: CorpusFrame, device: str, with_newton: bool, with_ipctk: boo
     return runners, missing
 
 
-def _alternate(runners: dict[str, Any], repeats: int) -> tuple[dict[str, list[float]], dict[str, list[float]],
-                                                                dict[str, Any]]:
+def _alternate(runners: dict[str, Any], repeats: int) -> tuple[dict[str, list[float]], dict[str, Any]]:
     """Time every runner once per repeat, rotating the order each repeat (after one warm-up call each).
 
-    Returns per runner: the seconds of each repeat, the device seconds of each repeat (pscc runners
-    only) and the last result.
+    A runner with a ``record`` method (the Warp detectors) is recorded into a graph after its warm-up,
+    and its replay is timed as one more entry of the rotation, under ``"<name> graph"``.
+
+    Returns the seconds of each repeat per timed entry, and each runner's last ``run()`` result.
     """
-    names = list(runners)
-    results = {name: runners[name].run() for name in names}
+    results = {name: runner.run() for name, runner in runners.items()}
+    timed: dict[str, Callable[[], Any]] = {}
+    for name, runner in runners.items():
+        timed[name] = runner.run
+        if hasattr(runner, "record"):
+            runner.record()
+            runner.replay()
+            timed[f"{name} graph"] = runner.replay
+    names = list(timed)
     seconds: dict[str, list[float]] = {name: [] for name in names}
-    device_times: dict[str, list[float]] = {name: [] for name in names if isinstance(runners[name], _PsccRunner)}
     for k in range(repeats):
         shift = k % len(names)
         for name in names[shift:] + names[:shift]:
             started = time.perf_counter()
-            results[name] = runners[name].run()
+            value = timed[name]()
             seconds[name].append(time.perf_counter() - started)
-            if name in device_times:
-                device_times[name].append(device_seconds(results[name]))
-    return seconds, device_times, results
+            if name in runners:
+                results[name] = value
+    return seconds, results
+
+
+def _best_seconds(seconds: dict[str, list[float]], name: str) -> list[float]:
+    """Per repeat, the faster of ``name``'s call and its graph replay (the call alone without a graph)."""
+    if f"{name} graph" not in seconds:
+        return seconds[name]
+    return [min(a, b) for a, b in zip(seconds[name], seconds[f"{name} graph"], strict=True)]
+
+
+def _same_rows(a: Any, b: Any) -> bool:
+    """Whether results ``a`` and ``b`` hold the same vertex-face and edge-edge rows."""
+    return (np.array_equal(a.vertex_face, b.vertex_face) and np.array_equal(a.edge_edge, b.edge_edge))
 
 
 def _is_subset(a: Any, b: Any) -> bool:
@@ -189,19 +250,25 @@ def bench_frame(frame: CorpusFrame, device: str, repeats: int, with_newton: bool
 
     Returns:
         ``{"frame", "source", "faces", "radius", "rest", "missing", "rows", "ratios"}``: ``rows`` hold
-        ``method``, ``seconds`` (median) and the method's counts; ``ratios`` map each pscc row key
-        (``pscc``, ``pscc-no-rest``) to its triangle pairs over spatial-hash's, whether its colliding
-        pairs are a subset of spatial-hash's and what fraction of them it finds (in DCD pscc culls pairs
-        inside one front node), and its median time ratios against the other methods
-        (``time_vs_<method>``, ``device_vs_<method>``).
+        ``method``, ``seconds`` (median of the call: pscc's host ``detect()``, Newton's eager launches),
+        ``graph_seconds`` (median graph replay, Warp detectors), ``graph_matches`` (pscc: the replay
+        gave the host call's rows) and the method's counts; ``ratios`` map each pscc row key (``pscc``,
+        ``pscc-no-rest``) to its triangle pairs over spatial-hash's, whether its colliding pairs are a
+        subset of spatial-hash's and what fraction of them it finds (in DCD pscc culls pairs inside one
+        front node), and, against every other method, ``time_vs_<method>`` (pscc's graph replay over
+        the other's faster of call and replay) and ``host_vs_<method>`` (pscc's host call over the
+        other's call), each the median of per-repeat ratios.
     """
     runners, missing = _runners(frame, device, with_newton, with_ipctk)
-    seconds, device_times, results = _alternate(runners, repeats)
+    seconds, results = _alternate(runners, repeats)
     rows = []
     for name, runner in runners.items():
         row = {"method": name, "seconds": statistics.median(seconds[name]), **runner.row(results[name])}
-        if name in device_times:
-            row["device_seconds"] = statistics.median(device_times[name])
+        if f"{name} graph" in seconds:
+            row["graph_seconds"] = statistics.median(seconds[f"{name} graph"])
+        if isinstance(runner, _PsccRunner):
+            runner.replay()  # the last timed call may have been the host call, which shares the buffers
+            row["graph_matches"] = _same_rows(runner.replayed(), results[name])
         rows.append(row)
     base = results["spatial-hash"]
     by_method = {r["method"]: r for r in rows}
@@ -219,9 +286,9 @@ def bench_frame(frame: CorpusFrame, device: str, repeats: int, with_newton: bool
             if other in ("pscc", "pscc-no-rest"):
                 continue
             entry[f"time_vs_{other}"] = statistics.median(
+                a / b for a, b in zip(seconds[f"{name} graph"], _best_seconds(seconds, other), strict=True))
+            entry[f"host_vs_{other}"] = statistics.median(
                 a / b for a, b in zip(seconds[name], seconds[other], strict=True))
-            entry[f"device_vs_{other}"] = statistics.median(
-                a / b for a, b in zip(device_times[name], seconds[other], strict=True))
         ratios[name] = entry
     return {"frame": frame.name, "source": frame.source, "faces": frame.face_count, "radius": frame.radius,
             "rest": frame.rest is not None, "missing": missing, "rows": rows, "ratios": ratios}
@@ -268,8 +335,12 @@ def report(results: dict[str, Any]) -> list[str]:
         "are colliding pairs after the narrow phase (Newton: its own queries; ipctk: candidates). `overflow`:",
         "an edge met more edges than Newton's default per-edge buffer (32) holds; its count is truncated.",
         "`bytes/tri` is pscc's device memory, Newton's detector arrays (its BVH nodes not counted).",
+        "`call s`: pscc's host `detect()` (upload, detection, sorted host rows), Newton's eager launches;",
+        "`graph s`: the device-array detection recorded once (`wp.ScopedCapture`) and replayed, as pscc's",
+        "simulator runs it, plus pscc's one counter read (`check_capacity`) or Newton's sync. Every pscc",
+        "replay gave the host call's rows (checked on every frame).",
         "",
-        "| frame | faces | method | BV tests | triangle pairs | candidates | VF | EE | seconds | device s "
+        "| frame | faces | method | BV tests | triangle pairs | candidates | VF | EE | call s | graph s "
         "| bytes/tri |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
@@ -280,23 +351,26 @@ def report(results: dict[str, Any]) -> list[str]:
             ee = r.get("edge_edge_pairs", r.get("edge_edge_candidates", ""))
             if r.get("overflow"):
                 ee = f"{ee} (overflow)"
+            graph = f"{r['graph_seconds']:.4f}" if "graph_seconds" in r else ""
+            if r.get("graph_matches") is False:
+                graph += " (**rows differ**)"
             cells = [entry["frame"], f"{entry['faces']:,}", label, _count(r.get("bv_tests")),
                      _count(r.get("triangle_pairs")), _count(r.get("candidate_pairs")), _count(vf), _count(ee),
-                     f"{r['seconds']:.4f}", f"{r['device_seconds']:.4f}" if "device_seconds" in r else "",
+                     f"{r['seconds']:.4f}", graph,
                      f"{r['bytes_per_triangle']:.0f}" if "bytes_per_triangle" in r else ""]
             lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",
         f"Targets (issue 14): triangle pairs at most {TARGETS['pairs_rest']} of spatial-hash's with rest",
         f"coordinates and {TARGETS['pairs_no_rest']} without; DCD time at most 1/3 of Newton's, at most ipctk's",
-        "LBVH on one thread, at most spatial-hash's. Times are whole `detect()` calls; the",
-        "`device` columns leave out pscc's output stage (copying and sorting the pairs on the host).",
-        "`found`: pscc's colliding pairs (VF + EE) over spatial-hash's, which are brute force's. In DCD pscc",
-        "returns a subset (checked): features of one front node closer than the radius are culled, because",
-        "the node's certificate is about intersection, not distance (`docs/pscc.md`).",
+        "LBVH on one thread, at most spatial-hash's. `time` ratios: pscc's graph replay over the other",
+        "method's faster of call and replay (ipctk: its call); `host` ratios: pscc's host call over the other's",
+        "call. `found`: pscc's colliding pairs (VF + EE) over spatial-hash's, which are brute force's. In DCD",
+        "pscc returns a subset (checked): features of one front node closer than the radius are culled,",
+        "because the node's certificate is about intersection, not distance (`docs/pscc.md`).",
         "",
         "| frame | pscc | pairs / spatial-hash | found | time / spatial-hash | time / newton "
-        "| device / newton | time / ipctk 1 thread | device / ipctk 1 thread | time / ipctk 2 threads |",
+        "| host / newton | time / ipctk 1 thread | host / ipctk 1 thread | time / ipctk 2 threads |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     met = {key: [0, 0] for key in TARGETS}
@@ -311,7 +385,7 @@ def report(results: dict[str, Any]) -> list[str]:
             _tally(met, "time_vs_spatial_hash", q["time_vs_spatial-hash"])
             for key, target in (("newton", "time_vs_newton"), ("ipctk-lbvh-1", "time_vs_ipctk_1")):
                 if f"time_vs_{key}" in q:
-                    cells += [_verdict(q[f"time_vs_{key}"], TARGETS[target]), f"{q[f'device_vs_{key}']:.2f}"]
+                    cells += [_verdict(q[f"time_vs_{key}"], TARGETS[target]), f"{q[f'host_vs_{key}']:.2f}"]
                     _tally(met, target, q[f"time_vs_{key}"])
                 else:
                     cells += ["", ""]

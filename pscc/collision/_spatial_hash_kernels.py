@@ -131,6 +131,11 @@ class SlabArgs:
 
     ``positions_t1`` is read only when ``swept`` != 0 (CCD: the slab holds both ends of the step).
     The margin that grows each end of a slab depends on the scene box, so it is in ``GridState``.
+    ``group_skip[g]`` (written by ``_compute_group_slabs``, read by ``_plan_rows``) lets the row plan
+    pass groups too small to be slab-tested: [0] the size of the largest group after g in its cell (0
+    for the last); [1] and [2] the first group after g in its cell with at least ``min_work`` and
+    ``ceil(min_work / 2)`` entries (the smallest that a group of one or two entries slab-tests), or
+    one past the cell's last group.
     """
 
     enabled: int
@@ -139,6 +144,7 @@ class SlabArgs:
     positions_t1: wp.array(dtype=wp.vec3)
     swept: int
     min_work: wp.int64
+    group_skip: wp.array(dtype=wp.vec3i)
 
 
 @wp.func
@@ -608,13 +614,34 @@ def _compute_group_slabs(
     """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
     this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
     A zero axis (a degenerate middle face) marks a group that is never culled. Groups
-    whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped."""
+    whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped. The first
+    group of each cell also writes the cell's ``slab.group_skip``."""
     g = wp.tid()
-    if wp.int64(g) >= info[_LIVE_GROUPS]:
+    live = int(info[_LIVE_GROUPS])
+    if g >= live:
         return
     start = group_start[g]
     end = group_end[g]
     cell = group_cell[g]
+    if g == 0 or group_cell[g - 1] != cell:
+        # The cell's first group writes every group's ``slab.group_skip`` (one backward walk per cell,
+        # O(groups) in all).
+        last = g
+        while last + 1 < live and group_cell[last + 1] == cell:
+            last += 1
+        largest = int(0)
+        next_for_one = last + 1
+        next_for_two = last + 1
+        h = last
+        while h >= g:
+            slab.group_skip[h] = wp.vec3i(largest, next_for_one, next_for_two)
+            size = wp.int64(group_end[h] - group_start[h])
+            largest = wp.max(largest, int(size))
+            if size >= slab.min_work:
+                next_for_one = h
+            if wp.int64(2) * size >= slab.min_work:
+                next_for_two = h
+            h -= 1
     cell_start = int(0)
     if cell > 0:
         cell_start = cell_end[cell - 1]
@@ -676,6 +703,15 @@ def _slab_pair_passes(
     return True
 
 
+@wp.func
+def _bit_range(lo: int, hi: int) -> wp.uint64:
+    """The uint64 with bits lo .. hi - 1 set (0 <= lo < hi <= 64)."""
+    upper = ~wp.uint64(0)
+    if hi < 64:
+        upper = (wp.uint64(1) << wp.uint64(hi)) - wp.uint64(1)
+    return upper & ~((wp.uint64(1) << wp.uint64(lo)) - wp.uint64(1))
+
+
 @wp.kernel
 def _plan_rows(
     # in:
@@ -702,9 +738,12 @@ def _plan_rows(
     With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
     same key never passes and its face pairs are counted as same-node pairs (they must be 0: faces of
     one node are never paired). Once no check is left for the rest of the cell (no key check, and no
-    slab test or past MASK_BITS), the rest is one run, added in O(1)."""
+    slab test, past MASK_BITS or no later group large enough for one: ``slab.group_skip``), the rest
+    is one run, added in O(1), its mask bits set; for a group of one or two entries, a stretch of later
+    groups too small for a slab test with it is passed in O(1) too."""
     g = wp.tid()
-    if wp.int64(g) >= info[_LIVE_GROUPS]:
+    live = int(info[_LIVE_GROUPS])
+    if g >= live:
         row_count[g] = 0
         return
     margin = grid[0].margin
@@ -723,7 +762,34 @@ def _plan_rows(
     t = int(0)
     b = end
     while b < stop:
-        if check_keys == 0 and (slab.enabled == 0 or t >= _MASK_BITS):
+        rest_passes = check_keys == 0 and (slab.enabled == 0 or t >= _MASK_BITS)
+        if not rest_passes and check_keys == 0:
+            skip = slab.group_skip[h - 1]
+            if n_g * wp.int64(skip[0]) < slab.min_work:
+                # No later group of the cell is large enough to be slab-tested: all of them pass.
+                mask = mask | _bit_range(t, _MASK_BITS)
+                rest_passes = True
+            elif n_g <= wp.int64(2):
+                # Groups h .. jump - 1 are too small for a slab test with a group of one or two entries:
+                # they pass, in O(1).
+                jump = skip[1]
+                if n_g == wp.int64(2):
+                    jump = skip[2]
+                if jump > h:
+                    b_next = stop
+                    if jump < live and group_cell[jump] == group_cell[g]:
+                        b_next = group_start[jump]
+                    k = jump - h
+                    mask = mask | _bit_range(t, wp.min(t + k, _MASK_BITS))
+                    work += n_g * wp.int64(b_next - b)
+                    if not in_run:
+                        runs += 1
+                    in_run = True
+                    b = b_next
+                    h = jump
+                    t += k
+                    continue
+        if rest_passes:
             if not in_run:
                 runs += 1
             work += n_g * wp.int64(stop - b)
@@ -820,7 +886,11 @@ def _write_rows(
     b = group_end[g]
     run_start = int(-1)
     while b < stop:
-        if check_keys == 0 and (slab_enabled == 0 or t >= _MASK_BITS):
+        # The rest is one run when nothing is checked past here: no key check, and no slab test, past
+        # MASK_BITS, or every mask bit from t on set (``_plan_rows`` sets them all when it stops early).
+        if check_keys == 0 and (slab_enabled == 0 or t >= _MASK_BITS
+                                or (mask | ((wp.uint64(1) << wp.uint64(wp.min(t, _MASK_BITS - 1))) - wp.uint64(1)))
+                                == ~wp.uint64(0)):
             if run_start < 0:
                 run_start = b
             break

@@ -415,7 +415,9 @@ class CollisionDetector:
                 self.boxes.face_lower, self.boxes.face_upper, node_id,
                 positions_t0=x0, positions_t1=x1, half_distance=0.5 * h,
                 node_id_bound=self.bvh.node_count if node_id is not None else None,
-                face_order=self.bvh.arrays.face_order if node_id is not None else None)
+                face_order=self.bvh.arrays.face_order if node_id is not None else None,
+                # Front nodes are BVH nodes: each covers a contiguous range of the BVH's leaf order.
+                order_is_node_contiguous=node_id is not None)
             lap("spatial_hash")
             self.feature_pairs.extract_device(self.spatial_hash.pairs, self.spatial_hash.counts, self.candidates,
                                               x0, x1, h, self._object_ids, self._feature_boxes)

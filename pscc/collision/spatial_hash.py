@@ -42,6 +42,10 @@ group_axis / group_slab    (S,) vec3 / vec2      slab test only: axis of group g
                                                  calls only
 group_mask                 (S,) uint64           slab test only: bit t = the t-th later group of the cell
                                                  passed (or was not tested)
+group_skip                 (S,) vec3i            slab test only: largest later group of g's cell, and the
+                                                 next later groups large enough to be slab-tested with a
+                                                 group of one / two entries (lets the row plan pass
+                                                 groups too small to slab-test in O(1))
 row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
 row_span                   (R,) vec3i            work row r = (g, b_start, b_end): entries of group g
                                                  against entries [b_start, b_end) of its cell
@@ -408,7 +412,8 @@ class SpatialHash:
                   TableSpec("group_cell", g, wp.int32), TableSpec("row_span", rows, wp.vec3i),
                   TableSpec("row_work", rows, wp.int64), TableSpec("row_scan", rows, wp.int64),
                   TableSpec("group_axis", slabs, wp.vec3), TableSpec("group_slab", slabs, wp.vec2),
-                  TableSpec("group_mask", slabs, wp.uint64), TableSpec("pairs", pair_slots, wp.vec2i, output=True),
+                  TableSpec("group_mask", slabs, wp.uint64), TableSpec("group_skip", slabs, wp.vec3i),
+                  TableSpec("pairs", pair_slots, wp.vec2i, output=True),
                   TableSpec("pair_keys", pair_slots if self.sort_pairs else 1, wp.int64)]
         lenders = self._lenders()
         placed, self._lent_names = place_tables(tables, lenders, self.device)
@@ -439,7 +444,8 @@ class SpatialHash:
         names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
                  "faces", "entry_key", "entry_face", "cell_end",
-                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "row_span", "row_work",
+                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "row_span",
+                 "row_work",
                  "row_scan", "pairs", "pair_keys")
         # Tables in a lent buffer (lend_scratch) and faces passed in are the caller's memory: counted as 0.
         borrowed = self._lent_names | ({"faces"} if self._faces_given else set())
@@ -536,6 +542,7 @@ class SpatialHash:
         node_id_bound: int | None = None,
         face_order: wp.array | None = None,
         cell_size: float | None = None,
+        order_is_node_contiguous: bool = False,
     ) -> None:
         """The pairs of :meth:`find_pairs`, left on the device: no host read, synchronization,
         allocation or upload, so the call can be recorded into a graph.
@@ -561,6 +568,10 @@ class SpatialHash:
             node_id_bound: node ids lie in [0, node_id_bound) (checked on the device), or ``None``.
             face_order: node-contiguous permutation of the faces (checked on the device), or ``None``.
             cell_size: grid cell edge, or ``None`` (``cell_size_factor`` x the mean box axis length).
+            order_is_node_contiguous: the caller guarantees that ``face_order`` keeps the faces of every
+                node together (as a BVH's leaf order does for node ids that are BVH nodes, the
+                detector's case). The device check that finds a split node is then left out: it
+                compares every group with every later group of its cell, O(groups^2) per cell.
             Only types, shapes, devices and host scalars are validated here.
 
         Raises:
@@ -604,7 +615,7 @@ class SpatialHash:
             # Faces in node-contiguous order (own ids: face order; else the given order) need only the
             # cell bits sorted.
             self._insert_faces(face_lower, face_upper, node_id, node_bits, order, ordered, own_nodes or ordered)
-            self._build_tables(node_bits, slab, int(ordered))
+            self._build_tables(node_bits, slab, int(ordered and not order_is_node_contiguous))
             self._test_pairs(face_lower, face_upper, node_bits)
             if self.sort_pairs:
                 self._sort_pairs()
@@ -776,6 +787,7 @@ class SpatialHash:
         slab.faces = self.faces
         slab.swept = 0
         slab.min_work = self.slab_min_work
+        slab.group_skip = self.group_skip
         if not (self.group_slab_test and grouped):
             slab.positions_t0 = slab.positions_t1 = self.chunk_lower
             return slab, 0.0

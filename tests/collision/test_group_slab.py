@@ -294,6 +294,43 @@ def test_face_order_gives_the_same_pairs_with_a_shorter_sort() -> None:
         assert _triangle_distance(x[mesh.faces[a]], x[mesh.faces[b]]) > 2.0 * half * (1.0 - 1e-9)
 
 
+@pytest.mark.parametrize("slab", [False, True])
+def test_a_node_contiguous_order_skips_the_split_check_and_nothing_else(slab: bool) -> None:
+    # The detector's case: node ids of a front in the BVH's leaf order. Telling the hash so leaves out
+    # the per-cell split-node check (and lets the row plan pass small groups in O(1)); pairs, BV tests
+    # and slab tests are those of the checked call.
+    mesh, x, half, detector = _twisted_front(1500, 4, 0.3)
+    node = detector.front.node_id.numpy()
+    order_np = detector.bvh.face_order.astype(np.int32)
+    ranks = node[order_np]
+    assert all(np.all(np.diff(np.flatnonzero(ranks == n)) == 1) for n in np.unique(ranks))  # contiguous runs
+    device = "cpu"
+    lower, upper = _boxes(mesh.faces, x, None, half)
+    arrays = [wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device),
+              wp.array(node, dtype=wp.int32, device=device)]
+    order = wp.array(order_np, dtype=wp.int32, device=device)
+
+    def run(contiguous: bool):
+        hash_ = SpatialHash(mesh.face_count, device, faces=wp.array(mesh.faces, dtype=wp.vec3i, device=device),
+                            group_slab_test=slab)
+        while True:
+            hash_.find_pairs_device(*arrays, positions_t0=wp.array(x, dtype=wp.vec3, device=device),
+                                    half_distance=half, node_id_bound=detector.bvh.node_count, face_order=order,
+                                    order_is_node_contiguous=contiguous)
+            if hash_.check_capacity():
+                break
+        stats = hash_.stats
+        return hash_.pairs_numpy(), (stats.groups, stats.rows, stats.bv_tests, stats.slab_tests, stats.triangle_pairs)
+
+    checked, checked_stats = run(False)
+    trusted, trusted_stats = run(True)
+    assert checked.shape[0] > 0
+    np.testing.assert_array_equal(trusted, checked)
+    assert trusted_stats == checked_stats
+    if slab:
+        assert checked_stats[3] > 0  # the slab test ran
+
+
 def test_bad_face_order() -> None:
     device = "cpu"
     faces = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]], dtype=np.int32)
