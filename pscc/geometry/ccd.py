@@ -82,6 +82,7 @@ class CcdParameters:
     coplanarity_factor: wp.float32
     toi_tolerance: wp.float32
     plane_filter: wp.int32
+    distance_tolerance: wp.float32
 
 
 def ccd_parameters() -> CcdParameters:
@@ -95,6 +96,7 @@ def ccd_parameters() -> CcdParameters:
     params.coplanarity_factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
     params.toi_tolerance = tolerances.CCD_TOI_TOLERANCE
     params.plane_filter = 1
+    params.distance_tolerance = tolerances.CCD_DISTANCE_TOLERANCE
     return params
 
 
@@ -391,7 +393,7 @@ def _ccd_search(
     count = int(1)
     best = float(2.0)
     boxes = int(0)
-    tolerance = params.codomain_tolerance * scale
+    tolerance = wp.max(params.codomain_tolerance * scale, params.distance_tolerance * minimum_distance)
     min_width = params.min_parameter_width
 
     while count > 0:
