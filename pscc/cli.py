@@ -1,4 +1,4 @@
-"""Command-line interface: ``pscc detect``, ``demo``, ``simulate`` and ``scenes`` (also ``python -m pscc``).
+"""Command-line interface: ``pscc detect``, ``demo``, ``simulate``, ``batch`` and ``scenes`` (also ``python -m pscc``).
 
 The CLI only parses arguments, calls the public API and prints. Exit statuses:
 
@@ -11,6 +11,13 @@ The CLI only parses arguments, calls the public API and prints. Exit statuses:
 130   interrupted (Ctrl-C): one line; a simulation keeps its last checkpoint for ``--resume``
 143   terminated (SIGTERM): as for Ctrl-C
 ====  =====================================================================================
+
+``pscc batch`` (docs/batch.md) exits with 0 when every run of the sweep is done; 2 for a bad sweep
+file (nothing is written and no task starts), a folder that holds a batch without ``--resume``, Ray
+missing or unreachable, ``--devices cuda`` on a cluster without GPUs, and when some runs failed
+(the others ran to the end; ``summary.json`` holds each error); 130 / 143 after Ctrl-C / SIGTERM,
+once the tasks are cancelled (they keep their checkpoints), ``summary.json`` lists what finished and
+a local Ray instance is shut down (a cluster named by ``--address`` never is).
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ import numpy as np
 
 from pscc._atomic import write_atomic
 from pscc.errors import InputError, OutputError, PsccError
+from pscc.errors import one_line as _one_line
 from pscc.io.run_folder import RunFolder, write_text_atomic
 
 EXIT_INTERNAL_ERROR = 1
@@ -212,6 +220,23 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _batch(args: argparse.Namespace) -> int:
+    from pscc.batch.runner import run_batch
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError("argument", "--workers", f"{args.workers} is below 1", "pass --workers 1 or more")
+    if args.workers is not None and args.address is not None:
+        raise InputError("argument", "--workers", "--workers sizes a local Ray instance, but --address names a "
+                         "cluster", "leave out --workers: the cluster's resources decide how many runs go at once")
+    out_dir = _out_dir(args.out_dir)
+    data = run_batch(args.sweep, out_dir, workers=args.workers, address=args.address, devices=args.devices,
+                     resume=args.resume, progress=not args.no_progress, echo=print)
+    total, ran = len(data["runs"]), sum(1 for r in data["runs"] if r["ran"])
+    print(f"{total} run{'s' if total != 1 else ''} done ({ran} run now). Wrote {out_dir}/runs/<run id>/, "
+          f"{out_dir}/summary.json and {out_dir}/summary.csv")
+    return 0
+
+
 def _scenes(args: argparse.Namespace) -> int:
     from pscc.scenes.registry import scene_rows
 
@@ -285,6 +310,22 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--render", action="store_true", help="render preview.png and animation.mp4")
     simulate.set_defaults(run=_simulate)
 
+    batch = sub.add_parser("batch", help="run every combination of a sweep file as a Ray task (docs/batch.md)")
+    batch.add_argument("sweep", help="sweep file (.toml): [batch] scenes, frames, size and [batch.vary] key paths")
+    batch.add_argument("--out-dir", required=True,
+                       help="batch folder: runs/<run id>/, summary.json, summary.csv (a cluster: shared by all nodes)")
+    batch.add_argument("--workers", type=int, default=None,
+                       help="CPUs of the local Ray instance, i.e. runs at once (default: this machine's cores)")
+    batch.add_argument("--address", default=None,
+                       help="an existing Ray cluster: auto, HOST:PORT or ray://HOST:PORT (default: start a local one)")
+    batch.add_argument("--devices", default=None, choices=("cpu", "cuda"),
+                       help="each task takes one CPU, or one GPU (simulating on it); default: cuda when the "
+                            "cluster has GPUs, else cpu")
+    batch.add_argument("--resume", action="store_true", help="continue the batch in --out-dir: run only the runs "
+                                                             "not done, from their checkpoints")
+    batch.add_argument("--no-progress", action="store_true", help="no progress bar")
+    batch.set_defaults(run=_batch)
+
     scenes = sub.add_parser("scenes", help="list the built-in scenes with their cloth triangles per scale")
     scenes.add_argument("--json", action="store_true", help="print the list as JSON")
     scenes.set_defaults(run=_scenes)
@@ -340,14 +381,6 @@ def _device(name: str | None) -> str:
     if device.is_cuda and _warp_messages:
         print(_warp_messages, file=sys.stderr)
     return str(device.alias)
-
-
-def _one_line(error: BaseException) -> str:
-    """The error's message and notes on one line, as sentences."""
-    parts = [" ".join(part.split()) for part in (str(error) or type(error).__name__,
-                                                   *getattr(error, "__notes__", []))]
-    return " ".join(part if part.endswith((".", "!", "?")) or k == len(parts) - 1 else part + "."
-                    for k, part in enumerate(parts) if part)
 
 
 def main(argv: list[str] | None = None) -> int:

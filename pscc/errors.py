@@ -45,3 +45,11 @@ class OutputError(_LocatedError):
 
 class CapacityError(PsccError, RuntimeError):
     """A device buffer could not be grown to the size a computation needs."""
+
+
+def one_line(error: BaseException) -> str:
+    """An error's message and notes (:meth:`BaseException.add_note`) on one line, as sentences."""
+    parts = [" ".join(part.split()) for part in (str(error) or type(error).__name__,
+                                                   *getattr(error, "__notes__", []))]
+    return " ".join(part if part.endswith((".", "!", "?")) or k == len(parts) - 1 else part + "."
+                    for k, part in enumerate(parts) if part)

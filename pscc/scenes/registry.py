@@ -15,6 +15,7 @@ import hashlib
 import json
 import os
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,8 @@ from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.errors import InputError
 from pscc.scenes import builtin, paper
 from pscc.scenes.builtin_file import builtin_scene_toml, load_builtin_file
-from pscc.scenes.scene_file import read_scene_file, resolved_scene_toml
+from pscc.scenes.scene_builder import SceneBuilder
+from pscc.scenes.scene_file import resolved_scene_toml
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.scene import Scene
 
@@ -189,15 +191,7 @@ def open_scene(spec: str, *, triangles: int | None = None, scale: float | None =
             raw = tomllib.loads(path.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
             raise InputError(str(path), "file", f"is not valid TOML ({error})", "fix the syntax") from None
-        if "builtin" in raw:
-            scene, contact, options = load_builtin_file(path, raw, build)
-            head = options["builtin"]
-            size = {k: v for k, v in head.items() if k != "scene"}
-            identity = {"scene": head["scene"], "cloth_triangles": int(scene.faces.shape[0])}
-            return SceneSource(scene, contact, options["frames"], identity, "builtin", (head["scene"], size))
-        loaded = read_scene_file(path)
-        identity = {"scene": loaded.scene.name, "file": str(path), "cloth_triangles": int(loaded.scene.faces.shape[0])}
-        return SceneSource(loaded.scene, loaded.contact, int(loaded.options["frames"]), identity, "file", loaded)
+        return source_from_toml(raw, path)
     scene = build(spec, triangles=triangles, scale=scale)
     if scale is not None:
         size: dict[str, Any] = {"scale": float(scale)}
@@ -209,6 +203,34 @@ def open_scene(spec: str, *, triangles: int | None = None, scale: float | None =
         size = {"triangles": builtin.DEFAULT_TRIANGLES[spec]}
     identity = {"scene": spec, "cloth_triangles": int(scene.faces.shape[0])}
     return SceneSource(scene, None, DEFAULT_FRAMES.get(spec, 30), identity, "builtin", (spec, size))
+
+
+def source_from_toml(raw: dict[str, Any], path: Path, *, build: Callable[..., Scene] = build) -> SceneSource:
+    """The scene a parsed scene file describes (a scene file, or a resolved built-in file with ``[builtin]``).
+
+    This is what :func:`open_scene` does with a ``.toml`` file once it is parsed; ``pscc batch`` calls
+    it on scene files with the values of a sweep applied.
+
+    Args:
+        raw: the parsed TOML document.
+        path: the file it stands for: error messages name it, a scene file's relative paths are
+            relative to its folder, and a scene file's run identity records it.
+        build: ``build(name, triangles=..., scale=...) -> Scene`` for a built-in file (default
+            :func:`build`; a caller checking many variants of one scene may pass a cached one).
+
+    Raises:
+        InputError: any key of the document is unknown, of the wrong type or out of range (naming
+            ``path``, the key path and the fix).
+    """
+    if "builtin" in raw:
+        scene, contact, options = load_builtin_file(path, raw, build)
+        head = options["builtin"]
+        size = {k: v for k, v in head.items() if k != "scene"}
+        identity = {"scene": head["scene"], "cloth_triangles": int(scene.faces.shape[0])}
+        return SceneSource(scene, contact, options["frames"], identity, "builtin", (head["scene"], size))
+    loaded = SceneBuilder(path).build(raw)
+    identity = {"scene": loaded.scene.name, "file": str(path), "cloth_triangles": int(loaded.scene.faces.shape[0])}
+    return SceneSource(loaded.scene, loaded.contact, int(loaded.options["frames"]), identity, "file", loaded)
 
 
 def scene_rows(scales: tuple[float, ...] = (0.05, 0.25, 1.0)) -> list[dict[str, Any]]:
