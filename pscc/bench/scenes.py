@@ -45,7 +45,7 @@ QUICK_FRAMES: int = 2
 """Frames of every run with ``--scenes quick``."""
 
 
-def _cloth_free(scene: Scene, cloth: np.ndarray, t: float) -> bool | None:
+def cloth_intersection_free(scene: Scene, cloth: np.ndarray, t: float) -> bool | None:
     """Whether nothing crosses the cloth (None without ipctk). Scenes with seams or a skinned body are checked
     with :func:`pscc.bench.oracle.cloth_crossings` (stitched pairs are not crossings, and the body may fold into
     itself); the others with ipctk's ``has_intersections`` on the whole mesh."""
@@ -80,7 +80,7 @@ def run_scene(name: str, triangles: int, frames: int, kind: str, device: str,
             record = sim.step_frame()
             records.append(record)
             cloth = sim.state.positions.numpy()[: sim.solver.cloth_vertex_count].astype(np.float64)
-            free = _cloth_free(scene, cloth, sim.time)
+            free = cloth_intersection_free(scene, cloth, sim.time)
             if free is not None:
                 row["checked_frames"] += 1
                 row["intersecting_frames"] += int(not free)

@@ -393,7 +393,10 @@ def _ccd_search(
     count = int(1)
     best = float(2.0)
     boxes = int(0)
-    tolerance = wp.max(params.codomain_tolerance * scale, params.distance_tolerance * minimum_distance)
+    tolerance = params.codomain_tolerance * scale
+    # With d_min > 0 a box whose image is below a fraction of d_min is only refined in t, down to the
+    # time-of-impact tolerance (its reported start time stays that close to the box's contact).
+    coarse_tolerance = wp.max(tolerance, params.distance_tolerance * minimum_distance)
     min_width = params.min_parameter_width
 
     while count > 0:
@@ -460,6 +463,9 @@ def _ccd_search(
         small = width[0] <= tolerance and width[1] <= tolerance and width[2] <= tolerance
         # Largest change of F along each parameter (F is linear in each one).
         change_t = _largest_change(f000, f100, f010, f110, f001, f101, f011, f111)
+        coarse = width[0] <= coarse_tolerance and width[1] <= coarse_tolerance and width[2] <= coarse_tolerance
+        if coarse and ((t1 - t0) <= params.toi_tolerance or change_t == 0.0):
+            small = True  # (F constant in t: a contact in the box is there at t0 already)
         change_u = _largest_change(f000, f010, f100, f110, f001, f011, f101, f111)
         change_v = _largest_change(f000, f001, f100, f101, f010, f011, f110, f111)
         can_t = (t1 - t0) > min_width and change_t > 0.0
@@ -474,7 +480,9 @@ def _ccd_search(
         # moves F the most.
         axis = int(-1)
         biggest = float(-1.0)
-        if can_t:
+        if coarse and (t1 - t0) > params.toi_tolerance:
+            axis = 0  # small enough in F: only its start time is still too coarse
+        elif can_t:
             gain_t = _best_half_gap(f000, f100, f010, f110, f001, f101, f011, f111, err)
             if gain_t * (1.0 - params.comparison_margin) > ms_sq:
                 axis = 0
