@@ -40,12 +40,11 @@ distance. Dimensionless.
 """
 
 CCD_DISTANCE_TOLERANCE: float = 0.1
-"""With a minimum distance d_min > 0, a CCD box is also not split further once its image is smaller
-than this fraction of d_min (the codomain tolerance is then ``max(CCD_CODOMAIN_TOLERANCE * M,
-CCD_DISTANCE_TOLERANCE * d_min)``), so a reported contact may be up to about
-``CCD_DISTANCE_TOLERANCE * sqrt(3) * d_min`` farther than d_min (plus the rounding term above).
-Without it a thick query refines the contact surface down to 1e-5 M, often far below d_min.
-Dimensionless."""
+"""With a minimum distance d_min > 0, a CCD box whose image is smaller than this fraction of d_min is
+split only along t, down to :data:`CCD_TOI_TOLERANCE`, and then reported at its start time, so a
+reported contact may be up to about ``CCD_DISTANCE_TOLERANCE * sqrt(3) * d_min`` farther than d_min
+(plus the rounding term above) and its time stays a lower bound. Without it a thick query refines the
+contact surface down to 1e-5 M, often far below d_min. Dimensionless."""
 
 CCD_MIN_PARAMETER_WIDTH: float = 2.0**-16
 """Smallest width of a (t, u, v) box along one parameter before that parameter is no longer split.
