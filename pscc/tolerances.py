@@ -39,12 +39,13 @@ positives therefore only occur for pairs whose minimal distance over the step is
 distance. Dimensionless.
 """
 
-CCD_DISTANCE_TOLERANCE: float = 0.1
+CCD_DISTANCE_TOLERANCE: float = 0.0
 """With a minimum distance d_min > 0, a CCD box whose image is smaller than this fraction of d_min is
 split only along t, down to :data:`CCD_TOI_TOLERANCE`, and then reported at its start time, so a
 reported contact may be up to about ``CCD_DISTANCE_TOLERANCE * sqrt(3) * d_min`` farther than d_min
-(plus the rounding term above) and its time stays a lower bound. Without it a thick query refines the
-contact surface down to 1e-5 M, often far below d_min. Dimensionless."""
+(plus the rounding term above) and its time stays a lower bound. 0 (the default) turns it off: at 0.1
+the CCD of late ``twisting`` frames is twice as fast, but the simulator's response then failed to
+resolve a step of ``twisting`` on the host path (frame 10), see docs/ccd.md. Dimensionless."""
 
 CCD_MIN_PARAMETER_WIDTH: float = 2.0**-16
 """Smallest width of a (t, u, v) box along one parameter before that parameter is no longer split.

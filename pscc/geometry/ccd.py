@@ -800,7 +800,7 @@ def input_rounding_error(points_t0: np.ndarray, points_t1: np.ndarray) -> np.nda
 
 
 def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device,
-             plane_filter: bool = True) -> tuple[np.ndarray, np.ndarray]:
+             plane_filter: bool = True, distance_tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     raw_t0 = np.asarray(points_t0.numpy() if isinstance(points_t0, wp.array) else points_t0)
     raw_t1 = np.asarray(points_t1.numpy() if isinstance(points_t1, wp.array) else points_t1)
     x0 = check_points(raw_t0, "points_t0", shape_tail=(4, 3))
@@ -819,6 +819,8 @@ def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device,
     toi = wp.empty(count, dtype=wp.float32, device=device)
     params = ccd_parameters()
     params.plane_filter = int(bool(plane_filter))
+    if distance_tolerance is not None:
+        params.distance_tolerance = float(check_nonnegative(distance_tolerance, "distance_tolerance"))
     wp.launch(
         kernel,
         dim=count,
@@ -844,6 +846,7 @@ def vertex_face_ccd(
     *,
     device: str | None = None,
     plane_filter: bool = True,
+    distance_tolerance: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched conservative vertex-face CCD.
 
@@ -856,6 +859,8 @@ def vertex_face_ccd(
         plane_filter: exclude pairs whose features provably stay farther than ``minimum_distance`` from
             each other's moving plane before the search (:func:`plane_keeps_distance`; False: the
             search decides every pair, for comparisons).
+        distance_tolerance: :data:`pscc.tolerances.CCD_DISTANCE_TOLERANCE` for this call (``None``: the
+            default).
 
     Returns:
         ``(hit, toi)``: (n,) bool and (n,) float32. ``toi`` is a lower bound of the first time of
@@ -864,7 +869,8 @@ def vertex_face_ccd(
     Raises:
         InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
     """
-    return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter)
+    return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter,
+                    distance_tolerance)
 
 
 def edge_edge_ccd(
@@ -874,6 +880,7 @@ def edge_edge_ccd(
     *,
     device: str | None = None,
     plane_filter: bool = True,
+    distance_tolerance: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Batched conservative edge-edge CCD.
 
@@ -883,6 +890,7 @@ def edge_edge_ccd(
         minimum_distance: Euclidean distance at which the edges count as colliding (0 = touching).
         device: Warp device to run on.
         plane_filter: as in :func:`vertex_face_ccd`.
+        distance_tolerance: as in :func:`vertex_face_ccd`.
 
     Returns:
         ``(hit, toi)`` as in :func:`vertex_face_ccd`.
@@ -890,4 +898,5 @@ def edge_edge_ccd(
     Raises:
         InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
     """
-    return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter)
+    return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter,
+                    distance_tolerance)

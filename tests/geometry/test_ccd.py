@@ -326,12 +326,13 @@ def _exact_distance(kind: str, points: np.ndarray) -> float:
 
 @settings(max_examples=25, deadline=None)
 @given(kind=st.sampled_from(["vertex-face", "edge-edge"]), seed=st.integers(0, 2**31 - 1),
-       d_min=st.sampled_from([1e-3, 0.02, 0.1]))
-def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind: str, seed: int,
-                                                                            d_min: float) -> None:
-    """With d_min > 0 the search stops refining at CCD_DISTANCE_TOLERANCE x d_min. It still never
-    misses a contact nor reports one late (against float64 distances at 401 times), and a pair it
-    reports came within d_min (1 + CCD_DISTANCE_TOLERANCE sqrt(3)) (plus the rounding term)."""
+       d_min=st.sampled_from([1e-3, 0.02, 0.1]), tolerance=st.sampled_from([CCD_DISTANCE_TOLERANCE, 0.1]))
+def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind: str, seed: int, d_min: float,
+                                                                            tolerance: float) -> None:
+    """With d_min > 0 and a distance tolerance (the default, and 0.1), a box below tolerance x d_min is
+    only refined in t. The CCD still never misses a contact nor reports one late (against float64
+    distances at 401 times), and a pair it reports came within d_min (1 + tolerance sqrt(3)) (plus the
+    rounding term)."""
     rng = np.random.default_rng(seed)
     count = 48
     # Features that start 0.3-3 d_min apart along their common normal and approach by 0-3 d_min, with a
@@ -361,7 +362,7 @@ def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind:
     moving = slice(0, 1) if kind == "vertex-face" else slice(2, 4)
     x1[:, moving] -= (normal * d_min * rng.uniform(0.0, 3.0, size=(count, 1)))[:, None, :]
     run = vertex_face_ccd if kind == "vertex-face" else edge_edge_ccd
-    hit, toi = run(x0.astype(np.float32), x1.astype(np.float32), d_min, device="cpu")
+    hit, toi = run(x0.astype(np.float32), x1.astype(np.float32), d_min, device="cpu", distance_tolerance=tolerance)
     x0 = x0.astype(np.float32).astype(np.float64)
     x1 = x1.astype(np.float32).astype(np.float64)
     times = np.linspace(0.0, 1.0, 401)
@@ -376,6 +377,6 @@ def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind:
             assert toi[i] <= times[inside[0]] + 1e-6, f"pair {i}: toi {toi[i]} after the contact at {times[inside[0]]}"
         if hit[i]:
             sampling = np.abs(x1[i] - x0[i]).max() * 2.0 / 400.0
-            bound = d_min * (1 + CCD_DISTANCE_TOLERANCE * np.sqrt(3.0)) + 1e-5 * scale[i] + sampling
+            bound = d_min * (1 + tolerance * np.sqrt(3.0)) + 1e-5 * scale[i] + sampling
             assert distances.min() <= bound, f"pair {i} reported, but never closer than {distances.min():.4g}"
     assert reached > 0  # the construction makes contacts to find
