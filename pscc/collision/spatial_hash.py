@@ -76,6 +76,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.errors import CapacityError, InputError
@@ -902,19 +903,19 @@ class SpatialHash:
         wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, live_limit],
                   outputs=[self.info], device=dev)
         if slab.enabled:
-            wp.launch(kernels._compute_group_slabs, dim=g,
+            wp.launch(row_kernels._compute_group_slabs, dim=g,
                       inputs=[self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
                               slab, self.info],
                       outputs=[self.group_axis, self.group_slab], device=dev)
-        wp.launch(kernels._plan_rows, dim=g,
+        wp.launch(row_kernels._plan_rows, dim=g,
                   inputs=[self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
                           self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys],
                   outputs=[self.group_mask, self.row_count, self.info], device=dev)
         wp.utils.array_scan(self.row_count, self.row_end, inclusive=True)
-        wp.launch(kernels._gather_row_info, dim=1,
+        wp.launch(row_kernels._gather_row_info, dim=1,
                   inputs=[self.row_end, self.row_capacity, self.test_threads, self.tests_per_thread],
                   outputs=[self.info], device=dev)
-        wp.launch(kernels._write_rows, dim=g,
+        wp.launch(row_kernels._write_rows, dim=g,
                   inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
                           self.group_mask, slab.enabled, check_keys, self.row_count, self.row_end, self.info],
                   outputs=[self.row_span, self.row_work], device=dev)
@@ -930,7 +931,7 @@ class SpatialHash:
         tables.row_span = self.row_span
         tables.row_work = self.row_work
         tables.row_scan = self.row_scan
-        wp.launch(kernels._test_bounding_volumes, dim=self.test_threads,
+        wp.launch(row_kernels._test_bounding_volumes, dim=self.test_threads,
                   inputs=[face_lower, face_upper, self.faces, int(self.skip_adjacent), self.grid, node_bits,
                           tables, self.info, self.pair_capacity],
                   outputs=[self.counts, self.pairs], device=self.device)

@@ -1,0 +1,488 @@
+"""Kernels of the work-row stage of :class:`pscc.collision.spatial_hash.SpatialHash` (private: only that
+host imports them): the group slab test, the row plan and the test pass. Layouts, counters and structs are
+those of :mod:`pscc.collision._spatial_hash_kernels`. Thread mappings, in launch order:
+
+=======================================  =============================================================
+kernel                                   one thread per
+=======================================  =============================================================
+``_compute_group_slabs``                 group slot (group slab test only): its axis and slab, and
+                                         (first group of a cell) the cell's ``group_skip``
+``_plan_rows``                           group slot: slab tests against later groups of its cell, its
+                                         rows (runs of later groups that pass) and their BV tests
+``_gather_row_info``                     (single thread) row count, the tests each test thread runs
+``_write_rows``                          group slot: its rows and the BV tests of each
+``_test_bounding_volumes``               test thread: a contiguous chunk of the BV tests
+=======================================  =============================================================
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from pscc.collision._spatial_hash_kernels import (
+    _FACE_TESTS,
+    _LIVE_GROUPS,
+    _LIVE_ROWS,
+    _LIVE_TESTS,
+    _MASK_BITS,
+    _ROWS,
+    _SAME_NODE,
+    _SLAB_TESTS,
+    _TEST_CHUNK,
+    GridState,
+    SlabArgs,
+    TableArgs,
+    cell_of_point,
+    key_cell,
+    linear_cell_id,
+)
+from pscc.geometry.aabb import boxes_overlap
+
+
+@wp.func
+def _project_group(
+    entry_face: wp.array(dtype=wp.int32), start: int, end: int, axis: wp.vec3, slab: SlabArgs
+) -> wp.vec2:
+    """(min, max) of axis . p over the vertices p of the faces of entries [start, end) at both ends of
+    the step (t0 only when not swept)."""
+    lo = float(wp.inf)
+    hi = float(-wp.inf)
+    for e in range(start, end):
+        tri = slab.faces[entry_face[e]]
+        for v in range(3):
+            s = wp.dot(axis, slab.positions_t0[tri[v]])
+            lo = wp.min(lo, s)
+            hi = wp.max(hi, s)
+            if slab.swept != 0:
+                s = wp.dot(axis, slab.positions_t1[tri[v]])
+                lo = wp.min(lo, s)
+                hi = wp.max(hi, s)
+    return wp.vec2(lo, hi)
+
+
+@wp.kernel
+def _compute_group_slabs(
+    # in:
+    entry_face: wp.array(dtype=wp.int32),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    slab: SlabArgs,
+    info: wp.array(dtype=wp.int64),
+    # out:
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
+):
+    """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
+    this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
+    A zero axis (a degenerate middle face) marks a group that is never culled. Groups
+    whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped. The first
+    group of each cell also writes the cell's ``slab.group_skip``."""
+    g = wp.tid()
+    live = int(info[_LIVE_GROUPS])
+    if g >= live:
+        return
+    start = group_start[g]
+    end = group_end[g]
+    cell = group_cell[g]
+    if g == 0 or group_cell[g - 1] != cell:
+        # The cell's first group writes every group's ``slab.group_skip`` (one backward walk per cell,
+        # O(groups) in all).
+        last = g
+        while last + 1 < live and group_cell[last + 1] == cell:
+            last += 1
+        largest = int(0)
+        next_for_one = last + 1
+        next_for_two = last + 1
+        h = last
+        while h >= g:
+            slab.group_skip[h] = wp.vec3i(largest, next_for_one, next_for_two)
+            size = wp.int64(group_end[h] - group_start[h])
+            largest = wp.max(largest, int(size))
+            if size >= slab.min_work:
+                next_for_one = h
+            if wp.int64(2) * size >= slab.min_work:
+                next_for_two = h
+            h -= 1
+    cell_start = int(0)
+    if cell > 0:
+        cell_start = cell_end[cell - 1]
+    others = (cell_end[cell] - cell_start) - (end - start)
+    if wp.int64(end - start) * wp.int64(others) < slab.min_work:
+        group_axis[g] = wp.vec3(0.0, 0.0, 0.0)
+        return
+    # The normal of the group's middle face (in fill order): one cross product
+    # instead of a pass over the group; on a flat patch every face gives nearly the same axis.
+    tri = slab.faces[entry_face[(start + end) // 2]]
+    a = slab.positions_t0[tri[0]]
+    b = slab.positions_t0[tri[1]]
+    c = slab.positions_t0[tri[2]]
+    if slab.swept != 0:
+        a = 0.5 * (a + slab.positions_t1[tri[0]])
+        b = 0.5 * (b + slab.positions_t1[tri[1]])
+        c = 0.5 * (c + slab.positions_t1[tri[2]])
+    n = wp.cross(b - a, c - a)
+    length = wp.length(n)
+    axis = wp.vec3(0.0, 0.0, 0.0)
+    if length > 0.0:
+        axis = n / length
+    group_axis[g] = axis
+    group_slab[g] = _project_group(entry_face, start, end, axis, slab)
+
+
+@wp.func
+def _slab_pair_passes(
+    entry_face: wp.array(dtype=wp.int32),
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
+    g: int,
+    g_start: int,
+    g_end: int,
+    h: int,
+    h_start: int,
+    h_end: int,
+    slab: SlabArgs,
+    margin: float,
+) -> bool:
+    """False when the faces of groups g and h are provably farther apart than twice the half distance:
+    the smaller group projected on the larger group's axis misses that group's slab."""
+    owner = g
+    other_start = h_start
+    other_end = h_end
+    if h_end - h_start > g_end - g_start:
+        owner = h
+        other_start = g_start
+        other_end = g_end
+    axis = group_axis[owner]
+    if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
+        return True
+    own = group_slab[owner]
+    other = _project_group(entry_face, other_start, other_end, axis, slab)
+    if other[0] - margin > own[1] + margin:
+        return False
+    if own[0] - margin > other[1] + margin:
+        return False
+    return True
+
+
+@wp.func
+def _bit_range(lo: int, hi: int) -> wp.uint64:
+    """The uint64 with bits lo .. hi - 1 set (0 <= lo < hi <= 64)."""
+    upper = ~wp.uint64(0)
+    if hi < 64:
+        upper = (wp.uint64(1) << wp.uint64(hi)) - wp.uint64(1)
+    return upper & ~((wp.uint64(1) << wp.uint64(lo)) - wp.uint64(1))
+
+
+@wp.kernel
+def _plan_rows(
+    # in:
+    entry_key: wp.array(dtype=wp.int64),
+    entry_face: wp.array(dtype=wp.int32),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
+    slab: SlabArgs,
+    grid: wp.array(dtype=GridState),
+    check_keys: int,
+    # out:
+    group_mask: wp.array(dtype=wp.uint64),
+    row_count: wp.array(dtype=wp.int32),
+    info: wp.array(dtype=wp.int64),
+):
+    """One thread per group slot g (0 rows past the live groups): walks the later groups of its cell
+    (the rest of the workLoadHashTable row), slab-tests the first MASK_BITS of them whose face tests
+    would number at least ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts
+    its rows (maximal runs of later groups that pass), its face tests and its slab tests (``info``).
+    With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
+    same key never passes and its face pairs are counted as same-node pairs (they must be 0: faces of
+    one node are never paired). Once no check is left for the rest of the cell (no key check, and no
+    slab test, past MASK_BITS or no later group large enough for one: ``slab.group_skip``), the rest
+    is one run, added in O(1), its mask bits set; for a group of one or two entries, a stretch of later
+    groups too small for a slab test with it is passed in O(1) too."""
+    g = wp.tid()
+    live = int(info[_LIVE_GROUPS])
+    if g >= live:
+        row_count[g] = 0
+        return
+    margin = grid[0].margin
+    start = group_start[g]
+    end = group_end[g]
+    n_g = wp.int64(end - start)
+    stop = cell_end[group_cell[g]]
+    mask = wp.uint64(0)
+    runs = int(0)
+    in_run = bool(False)
+    work = wp.int64(0)
+    slab_tests = wp.int64(0)
+    key = entry_key[start]
+    same_node = wp.int64(0)
+    h = g + 1
+    t = int(0)
+    b = end
+    while b < stop:
+        rest_passes = check_keys == 0 and (slab.enabled == 0 or t >= _MASK_BITS)
+        if not rest_passes and check_keys == 0:
+            skip = slab.group_skip[h - 1]
+            if n_g * wp.int64(skip[0]) < slab.min_work:
+                # No later group of the cell is large enough to be slab-tested: all of them pass.
+                mask = mask | _bit_range(t, _MASK_BITS)
+                rest_passes = True
+            elif n_g <= wp.int64(2):
+                # Groups h .. jump - 1 are too small for a slab test with a group of one or two entries:
+                # they pass, in O(1).
+                jump = skip[1]
+                if n_g == wp.int64(2):
+                    jump = skip[2]
+                if jump > h:
+                    b_next = stop
+                    if jump < live and group_cell[jump] == group_cell[g]:
+                        b_next = group_start[jump]
+                    k = jump - h
+                    mask = mask | _bit_range(t, wp.min(t + k, _MASK_BITS))
+                    work += n_g * wp.int64(b_next - b)
+                    if not in_run:
+                        runs += 1
+                    in_run = True
+                    b = b_next
+                    h = jump
+                    t += k
+                    continue
+        if rest_passes:
+            if not in_run:
+                runs += 1
+            work += n_g * wp.int64(stop - b)
+            break
+        h_end = group_end[h]
+        passed = bool(True)
+        if check_keys != 0 and entry_key[b] == key:
+            passed = False
+            same_node += n_g * wp.int64(h_end - b)
+        elif slab.enabled != 0 and t < _MASK_BITS:
+            if n_g * wp.int64(h_end - b) >= slab.min_work:
+                slab_tests += wp.int64(1)
+                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab,
+                                           margin)
+            if passed:
+                mask = mask | (wp.uint64(1) << wp.uint64(t))
+        if passed:
+            work += n_g * wp.int64(h_end - b)
+            if not in_run:
+                runs += 1
+        in_run = passed
+        b = h_end
+        h += 1
+        t += 1
+    if slab.enabled != 0:
+        group_mask[g] = mask
+    row_count[g] = runs
+    if work > wp.int64(0):
+        wp.atomic_add(info, _FACE_TESTS, work)
+    if slab_tests > wp.int64(0):
+        wp.atomic_add(info, _SLAB_TESTS, slab_tests)
+    if same_node > wp.int64(0):
+        wp.atomic_add(info, _SAME_NODE, same_node)
+
+
+@wp.kernel
+def _gather_row_info(
+    # in:
+    row_end: wp.array(dtype=wp.int32),
+    row_capacity: wp.int64,
+    test_threads: wp.int64,
+    min_chunk: wp.int64,
+    # out:
+    info: wp.array(dtype=wp.int64),
+):
+    """A single thread: the row count; when the rows fit, the BV tests of the test pass and the
+    chunk of them each of the ``test_threads`` threads runs (at least ``min_chunk``)."""
+    groups = int(info[_LIVE_GROUPS])
+    if groups == 0:
+        return
+    rows = wp.int64(row_end[groups - 1])
+    info[_ROWS] = rows
+    if rows > row_capacity:
+        return
+    info[_LIVE_ROWS] = rows
+    tests = info[_FACE_TESTS]
+    info[_LIVE_TESTS] = tests
+    info[_TEST_CHUNK] = wp.max(min_chunk, (tests + test_threads - wp.int64(1)) / test_threads)
+
+
+@wp.kernel
+def _write_rows(
+    # in:
+    entry_key: wp.array(dtype=wp.int64),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    group_mask: wp.array(dtype=wp.uint64),
+    slab_enabled: int,
+    check_keys: int,
+    row_count: wp.array(dtype=wp.int32),
+    row_end: wp.array(dtype=wp.int32),
+    info: wp.array(dtype=wp.int64),
+    # out:
+    row_span: wp.array(dtype=wp.vec3i),
+    row_work: wp.array(dtype=wp.int64),
+):
+    """One thread per live group g (none when the rows do not fit): the same walk as ``_plan_rows``,
+    writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
+    n_g x (b_end - b_start)."""
+    g = wp.tid()
+    if wp.int64(g) >= info[_LIVE_GROUPS] or info[_LIVE_ROWS] == wp.int64(0):
+        return
+    slot = row_end[g] - row_count[g]
+    n_g = wp.int64(group_end[g] - group_start[g])
+    stop = cell_end[group_cell[g]]
+    mask = wp.uint64(0)
+    if slab_enabled != 0:
+        mask = group_mask[g]
+    key = entry_key[group_start[g]]
+    h = g + 1
+    t = int(0)
+    b = group_end[g]
+    run_start = int(-1)
+    while b < stop:
+        # The rest is one run when nothing is checked past here: no key check, and no slab test, past
+        # MASK_BITS, or every mask bit from t on set (``_plan_rows`` sets them all when it stops early).
+        if check_keys == 0 and (slab_enabled == 0 or t >= _MASK_BITS
+                                or (mask | ((wp.uint64(1) << wp.uint64(wp.min(t, _MASK_BITS - 1))) - wp.uint64(1)))
+                                == ~wp.uint64(0)):
+            if run_start < 0:
+                run_start = b
+            break
+        h_end = group_end[h]
+        passed = bool(True)
+        if check_keys != 0 and entry_key[b] == key:
+            passed = False
+        elif slab_enabled != 0 and t < _MASK_BITS:
+            passed = ((mask >> wp.uint64(t)) & wp.uint64(1)) != wp.uint64(0)
+        if passed and run_start < 0:
+            run_start = b
+        if not passed and run_start >= 0:
+            row_span[slot] = wp.vec3i(g, run_start, b)
+            row_work[slot] = n_g * wp.int64(b - run_start)
+            slot += 1
+            run_start = -1
+        b = h_end
+        h += 1
+        t += 1
+    if run_start >= 0:
+        row_span[slot] = wp.vec3i(g, run_start, stop)
+        row_work[slot] = n_g * wp.int64(stop - run_start)
+
+
+@wp.func
+def _find_row(row_scan: wp.array(dtype=wp.int64), row_count: int, k: wp.int64) -> int:
+    """First row r with row_scan[r] > k (row_scan is the inclusive scan of the row work)."""
+    lo = int(0)
+    hi = row_count - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if row_scan[mid] > k:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@wp.kernel
+def _test_bounding_volumes(
+    # in:
+    face_lower: wp.array(dtype=wp.vec3),
+    face_upper: wp.array(dtype=wp.vec3),
+    faces: wp.array(dtype=wp.vec3i),
+    skip_adjacent: int,
+    grid: wp.array(dtype=GridState),
+    node_bits: int,
+    tables: TableArgs,
+    info: wp.array(dtype=wp.int64),
+    capacity: wp.int64,
+    # out:
+    counts: wp.array(dtype=wp.int64),
+    pairs: wp.array(dtype=wp.vec2i),
+):
+    """The paper's DecodePairsAndTest: test thread tid runs the BV tests [tid c, (tid + 1) c) of the
+    live total (c = ``info`` test chunk), one binary search for the chunk, then a walk along the
+    work rows. Emitted pairs are appended below ``capacity``; the counter keeps counting past it.
+
+    Row r = (g, b_start, b_end) holds the tests of every entry of group g against the entries
+    [b_start, b_end) (later groups of the same cell); every row has at least one test."""
+    total = info[_LIVE_TESTS]
+    chunk = info[_TEST_CHUNK]
+    k = wp.int64(wp.tid()) * chunk
+    if k >= total:
+        return
+    end_test = wp.min(total, k + chunk)
+    state = grid[0]
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    entry_face = tables.entry_face
+    entry_key = tables.entry_key
+    group_starts = tables.group_start
+    group_ends = tables.group_end
+    row_span = tables.row_span
+    row_work = tables.row_work
+    row_scan = tables.row_scan
+    r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
+    q = k - (row_scan[r] - row_work[r])
+    # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row r at
+    # offset q is entry a = group_start + q / rest against entry b = b_start + q % rest; the walk
+    # keeps both indices and divides only once per thread.
+    span = row_span[r]
+    g = span[0]
+    b_start = span[1]
+    b_end = span[2]
+    rest = wp.int64(b_end - b_start)
+    entry_a = group_starts[g] + int(q // rest)
+    entry_b = b_start + int(q % rest)
+    row_cell = key_cell(entry_key[group_starts[g]], node_bits)
+    last_a = group_ends[g]
+    fa = entry_face[entry_a]
+    lower_a = face_lower[fa]
+    upper_a = face_upper[fa]
+    while k < end_test:
+        fb = entry_face[entry_b]
+        # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
+        lower_b = face_lower[fb]
+        emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
+        if emit:
+            # Token position: only the cell holding the lower corner of the boxes' intersection emits.
+            token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
+            emit = linear_cell_id(token, state.dims) == row_cell
+        if emit and skip_adjacent != 0:
+            ta = faces[fa]
+            tb = faces[fb]
+            for u in range(3):
+                for v in range(3):
+                    if ta[u] == tb[v]:
+                        emit = False
+        if emit:
+            slot = wp.atomic_add(counts, 0, wp.int64(1))
+            if slot < capacity:
+                pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
+        k += wp.int64(1)
+        entry_b += 1
+        if entry_b == b_end:
+            entry_b = b_start
+            entry_a += 1
+            if entry_a == last_a:
+                if k >= end_test:
+                    break
+                r += 1
+                span = row_span[r]
+                g = span[0]
+                b_start = span[1]
+                b_end = span[2]
+                entry_a = group_starts[g]
+                entry_b = b_start
+                last_a = group_ends[g]
+                row_cell = key_cell(entry_key[entry_a], node_bits)
+            fa = entry_face[entry_a]
+            lower_a = face_lower[fa]
+            upper_a = face_upper[fa]
