@@ -21,6 +21,7 @@ from pscc import cli
 from pscc.cli import main
 from pscc.io.run_folder import RunFolder
 from pscc.mesh import folded_sheet
+from tests.scene_texts import crossing_sheets
 
 SMALL = ["--triangles", "100", "--no-progress"]
 
@@ -263,29 +264,11 @@ def test_run_files_have_the_permissions_of_the_frames(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ failures during a run
 
 
-CROSSING = """[scene]
-name = "crossing"
-frames = 2
-[contact]
-allow_initial_intersections = {allow}
-check_intersections = false
-max_response_rounds = 3
-max_step_halvings = 1
-[[cloth]]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-[[cloth]]
-rotate = [90.0, 0.0, 0.0]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-"""
 
 
 def test_crossing_input_is_refused_with_the_scene_file_key(tmp_path: Path, capsys) -> None:
     scene = tmp_path / "crossing.toml"
-    scene.write_text(CROSSING.format(allow="false"))
+    scene.write_text(crossing_sheets(allow=False))
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 2
     _one_error_line(capsys, "intersects itself", "allow_initial_intersections = true under [contact]")
     assert not (tmp_path / "out").exists()
@@ -302,7 +285,7 @@ def test_crossing_sheets_run_with_their_crossings_counted(tmp_path: Path) -> Non
     """Two sheets crossing at right angles: exempt from collision handling, they run (pushed apart slowly:
     still crossing after two frames), and every frame's stats count the crossings left."""
     scene = tmp_path / "crossing.toml"
-    scene.write_text(CROSSING.format(allow="true"))
+    scene.write_text(crossing_sheets(allow=True))
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 0
     frames = json.loads((tmp_path / "out" / "stats.json").read_text())["frames"]
     assert len(frames) == 2 and all(f["counts"]["intersecting_pairs"] > 0 for f in frames)
@@ -312,7 +295,7 @@ def test_a_run_that_fails_at_its_first_step_leaves_nothing_and_says_why(tmp_path
                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
     _hold_crossings(monkeypatch)
     scene = tmp_path / "crossing.toml"
-    scene.write_text(CROSSING.format(allow="true"))
+    scene.write_text(crossing_sheets(allow=True))
     out = tmp_path / "out"
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(out)]) == 2
     line = capsys.readouterr().err.strip()
@@ -638,7 +621,7 @@ def test_an_out_dir_name_too_long_is_one_line(tmp_path: Path, capsys) -> None:
 def test_a_step_failure_names_the_scene_and_the_step(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
     _hold_crossings(monkeypatch)
     scene = tmp_path / "crossing.toml"
-    scene.write_text(CROSSING.format(allow="true"))
+    scene.write_text(crossing_sheets(allow=True))
     assert main(["simulate", str(scene), "--no-progress", "--out-dir", str(tmp_path / "out")]) == 2
     _one_error_line(capsys, "pscc: error: crossing: step at t=0 s: could not be made intersection-free",
                     "Fix: separate the surfaces")

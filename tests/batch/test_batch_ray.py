@@ -19,6 +19,7 @@ import pytest
 from pscc.batch.runner import run_batch
 from pscc.cli import main
 from pscc.errors import InputError
+from tests.scene_texts import crossing_sheets
 
 ray = pytest.importorskip("ray")
 
@@ -110,30 +111,13 @@ def test_cuda_on_a_cluster_without_gpus_is_refused_before_anything_runs(tmp_path
     assert not (tmp_path / "out").exists()
 
 
-CROSSING = """[scene]
-name = "crossing"
-frames = 2
-[contact]
-check_intersections = false
-max_response_rounds = 3
-max_step_halvings = 1
-[[cloth]]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-[[cloth]]
-rotate = [90.0, 0.0, 0.0]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-"""
 
 
 def test_a_failed_run_does_not_stop_the_others_and_resume_runs_only_the_runs_not_done(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Two sheets that cross: allowed to start, they run with their crossings counted; refused, the run fails
     (at its start, in the worker: the sweep itself is valid)."""
-    (tmp_path / "crossing.toml").write_text(CROSSING)
+    (tmp_path / "crossing.toml").write_text(crossing_sheets())
     sweep = tmp_path / "sweep.toml"
     sweep.write_text('[batch]\nscenes = ["crossing.toml", "twist"]\nframes = 2\ntriangles = 100\n[batch.vary]\n'
                      '"contact.allow_initial_intersections" = [true, false]\n')

@@ -11,22 +11,7 @@ import numpy as np
 from pscc.batch.sweep import Run, expand_runs, load_sweep
 from pscc.batch.task import finished, run_task
 from pscc.io.run_folder import RunFolder
-
-CROSSING = """[scene]
-name = "crossing"
-frames = 2
-[contact]
-check_intersections = false
-[[cloth]]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-[[cloth]]
-rotate = [90.0, 0.0, 0.0]
-[cloth.sheet]
-size = [0.3, 0.3]
-cells = [4, 4]
-"""
+from tests.scene_texts import crossing_sheets
 
 
 def _runs(folder: Path, text: str) -> list[Run]:
@@ -81,7 +66,7 @@ def test_a_start_that_never_reached_a_checkpoint_is_started_over(tmp_path: Path)
 
 
 def test_a_run_that_fails_is_a_failed_record_not_an_exception(tmp_path: Path) -> None:
-    (tmp_path / "crossing.toml").write_text(CROSSING)
+    (tmp_path / "crossing.toml").write_text(crossing_sheets(response_limits=False))
     (run,) = _runs(tmp_path, '[batch]\nscenes = ["crossing.toml"]\n')
     out = tmp_path / "run"
     record = run_task(run, str(out), "cpu")
