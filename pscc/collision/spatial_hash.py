@@ -572,7 +572,9 @@ class SpatialHash:
             order_is_node_contiguous: the caller guarantees that ``face_order`` keeps the faces of every
                 node together (as a BVH's leaf order does for node ids that are BVH nodes, the
                 detector's case). The device check that finds a split node is then left out: it
-                compares every group with every later group of its cell, O(groups^2) per cell.
+                compares every group with every later group of its cell, O(groups^2) per cell. A wrong
+                promise costs pairs, not misses: two groups of one node in a cell are then tested like
+                groups of two nodes (extra face pairs of one node), never dropped.
             Only types, shapes, devices and host scalars are validated here.
 
         Raises:
