@@ -326,13 +326,13 @@ def _exact_distance(kind: str, points: np.ndarray) -> float:
 
 @settings(max_examples=25, deadline=None)
 @given(kind=st.sampled_from(["vertex-face", "edge-edge"]), seed=st.integers(0, 2**31 - 1),
-       d_min=st.sampled_from([1e-3, 0.02, 0.1]), tolerance=st.sampled_from([CCD_DISTANCE_TOLERANCE, 0.1]))
+       d_min=st.sampled_from([1e-3, 0.02, 0.1]), tolerance=st.sampled_from([0.0, CCD_DISTANCE_TOLERANCE, 0.25]))
 def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind: str, seed: int, d_min: float,
                                                                             tolerance: float) -> None:
-    """With d_min > 0 and a distance tolerance (the default, and 0.1), a box below tolerance x d_min is
-    only refined in t. The CCD still never misses a contact nor reports one late (against float64
-    distances at 401 times), and a pair it reports came within d_min (1 + tolerance sqrt(3)) (plus the
-    rounding term)."""
+    """With d_min > 0 and a distance tolerance (0, the default and 0.25: conservative advancement for pairs
+    that start clear of the band, boxes below tolerance x d_min refined only in t), the CCD never misses a
+    contact nor reports one late (against float64 distances at 401 times), and a pair it reports came
+    within d_min (1 + tolerance sqrt(3)) (plus the rounding term)."""
     rng = np.random.default_rng(seed)
     count = 48
     # Features that start 0.3-3 d_min apart along their common normal and approach by 0-3 d_min, with a
@@ -380,3 +380,43 @@ def test_thick_ccd_is_conservative_and_its_false_positives_stay_near_d_min(kind:
             bound = d_min * (1 + tolerance * np.sqrt(3.0)) + 1e-5 * scale[i] + sampling
             assert distances.min() <= bound, f"pair {i} reported, but never closer than {distances.min():.4g}"
     assert reached > 0  # the construction makes contacts to find
+
+
+@pytest.mark.parametrize("kind", ["vertex-face", "edge-edge"])
+@pytest.mark.parametrize("gap", [1.02, 1.05, 1.15, 1.5])
+def test_a_pair_resting_or_sliding_beyond_d_min_is_never_reported(kind: str, gap: float) -> None:
+    """A pair that stays ``gap`` x d_min apart (at rest, or sliding by 0.3 of its size) never comes within
+    d_min, so no distance tolerance may report it: reported at t = 0, no change of the end positions could
+    resolve it (the endless response rounds of the first versions of the tolerance). Pairs that start
+    within d_min (1 + sqrt 3 x tolerance) are therefore searched exactly, the others advanced.
+
+    The closest points sit at a vertex beside the other feature's plane (below d_min from it), and the
+    scene is turned by a fixed rotation, so neither the swept boxes, nor the motion bound, nor the plane
+    filter excludes the sliding pair before the search."""
+    d_min = 0.01
+    g = gap * d_min
+    if kind == "vertex-face":
+        # A vertex beyond the edge y = 0 of the triangle, half of g above its plane, sliding along the edge.
+        x0 = np.array([[0.3, -np.sqrt(0.75) * g, 0.5 * g], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        moving, slide_by, press_by = slice(0, 1), [0.3, 0.0, 0.0], [0.0, 2.0 * np.sqrt(0.75) * g, -g]
+    else:
+        # Edge a leaves edge b at its first end, g from b's middle, heading away from b; it slides along b.
+        x0 = np.array([[0.5, 0.8 * g, 0.6 * g], [0.5, 0.8 * g + 1.0, 0.6 * g - 0.5], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+        moving, slide_by, press_by = slice(0, 2), [0.3, 0.0, 0.0], [0.0, -1.6 * g, -1.2 * g]
+    rotation = np.linalg.qr(np.random.default_rng(7).normal(size=(3, 3)))[0]
+    slide = x0.copy()
+    slide[moving] += slide_by
+    pressed = x0.copy()
+    pressed[moving] += press_by
+    x0, slide, pressed = x0 @ rotation.T, slide @ rotation.T, pressed @ rotation.T
+    run = vertex_face_ccd if kind == "vertex-face" else edge_edge_ccd
+    for tolerance in (0.0, CCD_DISTANCE_TOLERANCE, 0.25):
+        hit, _ = run(np.stack([x0, x0]).astype(np.float32), np.stack([x0, slide]).astype(np.float32), d_min,
+                     device="cpu", distance_tolerance=tolerance)
+        assert not hit.any(), f"tolerance {tolerance}: a pair {gap} d_min apart was reported"
+    # The same pair moved straight through the other feature is found at every tolerance, never late.
+    contact = (gap - 1.0) / (2.0 * gap)
+    for tolerance in (0.0, CCD_DISTANCE_TOLERANCE, 0.25):
+        hit, toi = run(x0[None].astype(np.float32), pressed[None].astype(np.float32), d_min, device="cpu",
+                       distance_tolerance=tolerance)
+        assert hit[0] and toi[0] <= contact + 1e-6, f"tolerance {tolerance}: toi {toi[0]} after {contact}"

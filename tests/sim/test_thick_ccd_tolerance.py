@@ -1,26 +1,30 @@
-"""The CCD's distance tolerance (``CCD_DISTANCE_TOLERANCE``, off by default) in the simulator: the twisting
+"""The CCD's distance tolerance (``CCD_DISTANCE_TOLERANCE``, 0.1 by default) in the simulator: the twisting
 strip that a first version of it could not finish.
 
 That version reported a box below the tolerance at its start time whatever its length in time, up to
-half a step before the contact. The response then met constraints already satisfied at that time, and
-at frame 43 of ``twist`` at 2K triangles one collision survived 100 response rounds and 4 halvings.
-Such boxes are now refined in time down to ``CCD_TOI_TOLERANCE`` first. (The tolerance stays off: at
-0.1 the host path's ``twisting`` still stops at frame 10 the same way; docs/ccd.md.)
+half a step before the contact, and reported pairs that rest just beyond the minimum distance at t = 0.
+At frame 43 of ``twist`` at 2K triangles one collision survived 100 response rounds and 4 halvings. Now
+pairs that start within the tolerance's band are searched exactly, the others are decided by conservative
+advancement, and boxes below the tolerance are refined in time down to ``CCD_TOI_TOLERANCE`` first
+(docs/ccd.md).
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pscc.bench.oracle import cloth_crossings
 from pscc.scenes import build_scene
 from pscc.sim.simulation import Simulation
+from pscc.tolerances import CCD_DISTANCE_TOLERANCE
 
 
 def test_the_twisting_strip_runs_through_with_the_distance_tolerance() -> None:
     scene = build_scene("twist", 2000)
     sim = Simulation(scene, device="cpu")
-    sim.solver.detector.narrow.params.distance_tolerance = 0.1
+    assert CCD_DISTANCE_TOLERANCE > 0.0
+    assert sim.solver.detector.narrow.params.distance_tolerance == pytest.approx(CCD_DISTANCE_TOLERANCE)
     halvings = 0
     for _ in range(45):
         record = sim.step_frame()
