@@ -49,7 +49,7 @@ the search whose image is smaller than this fraction of d_min is split only alon
 ``tolerance x sqrt 3 x d_min`` farther than d_min (plus the rounding term above); its time stays a lower
 bound. A pair that starts closer is searched exactly (tolerance 0): a contact it reports at t = 0 could
 never be resolved by moving end positions. 0 refines every contact to :data:`CCD_CODOMAIN_TOLERANCE`. At 0.1
-the simulator's ``twisting`` at 5K runs at 1.04 s per frame instead of 3.87 (docs/ccd.md). Dimensionless."""
+the simulator's ``twisting`` at 5K runs at 1.01 s per frame instead of 3.87 (docs/ccd.md). Dimensionless."""
 
 CCD_ADVANCE_STEPS: int = 64
 """With a distance tolerance on: the conservative-advancement steps a CCD query may take before the box
