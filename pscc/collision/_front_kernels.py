@@ -93,17 +93,14 @@ def _node_passes(args: NodeTestArgs, node: int) -> bool:
     return nc.contour_test(bvh.contour_vertices, begin, end, args.positions_t0, o0, l, args.margin)
 
 
-@wp.kernel
-def _refit_level(
-    # in:
+@wp.func
+def _refit_node(
     args: NodeTestArgs,
-    first_node: int,
-    # out:
+    node: int,
     node_mask: wp.array(dtype=nc.mask_type),
     node_normal: wp.array(dtype=wp.vec3),
 ):
-    """One thread per node of one BVH level (node ids of a level are contiguous)."""
-    node = first_node + wp.tid()
+    """A leaf's direction mask and normal from its face; an inner node's from its children (refitted)."""
     bvh = args.bvh
     empty = nc.mask_type(wp.uint32(0), wp.uint32(0), wp.uint32(0), wp.uint32(0))
     if bvh.is_rigid[node] == 1:
@@ -133,6 +130,35 @@ def _refit_level(
     right = bvh.right[node]
     node_mask[node] = nc.mask_and(node_mask[left], node_mask[right])
     node_normal[node] = node_normal[left] + node_normal[right]
+
+
+@wp.kernel
+def _refit_level(
+    # in:
+    args: NodeTestArgs,
+    first_node: int,
+    # out:
+    node_mask: wp.array(dtype=nc.mask_type),
+    node_normal: wp.array(dtype=wp.vec3),
+):
+    """One thread per node of one BVH level (node ids of a level are contiguous). GPU launch shape."""
+    _refit_node(args, first_node + wp.tid(), node_mask, node_normal)
+
+
+@wp.kernel
+def _refit_all_in_order(
+    # in:
+    args: NodeTestArgs,
+    node_count: int,
+    # out:
+    node_mask: wp.array(dtype=nc.mask_type),
+    node_normal: wp.array(dtype=wp.vec3),
+):
+    """One thread refits every node, deepest level first (node ids grow with depth, so descending ids
+    reach both children before their parent). CPU launch shape: the CPU runs a launch's threads one after
+    another anyway, and one launch instead of one per level saves their fixed cost (:mod:`pscc._lanes`)."""
+    for k in range(node_count):
+        _refit_node(args, node_count - 1 - k, node_mask, node_normal)
 
 
 @wp.kernel

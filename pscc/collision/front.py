@@ -65,6 +65,7 @@ from pscc.collision._front_kernels import (
     _finish_shrink_round,
     _finish_sprout,
     _mark_front,
+    _refit_all_in_order,
     _refit_level,
     _scatter_frontier,
     _shrink_pairs,
@@ -356,11 +357,15 @@ class NormalConeFront:
 
         offsets = self.bvh.level_offsets
         self._refit_launches = []
-        for depth in range(len(offsets) - 2, -1, -1):
-            first, last = int(offsets[depth]), int(offsets[depth + 1])
-            if last > first:
-                self._refit_launches.append(
-                    record(_refit_level, last - first, [args, first], [self.node_mask, self.node_normal]))
+        if wp.get_device(device).is_cpu:
+            # One thread walks every node bottom-up: the same results as the level launches below.
+            self._refit_launches.append(record(_refit_all_in_order, 1, [args, n], [self.node_mask, self.node_normal]))
+        else:
+            for depth in range(len(offsets) - 2, -1, -1):
+                first, last = int(offsets[depth]), int(offsets[depth + 1])
+                if last > first:
+                    self._refit_launches.append(
+                        record(_refit_level, last - first, [args, first], [self.node_mask, self.node_normal]))
         self._launches = {
             "begin": record(_begin_update, 1, [self.shrink_interval], [self.calls, self._counters, self._lifted]),
             "clear_in_front": record(_clear_flags, n + 1, [], [self.in_front, self._marked]),

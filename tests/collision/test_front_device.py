@@ -254,3 +254,29 @@ def test_per_call_tables_in_lent_memory_give_the_same_fronts_and_follow_a_replac
     assert start <= lent.node_mask.ptr < start + buffers[0].capacity, "the tables moved to the new buffer"
     lent.lend_scratch(None)
     assert not lent._lent_names and lent.device_bytes == own.device_bytes
+
+
+@pytest.mark.parametrize("swept", [True, False])
+def test_the_cpu_refit_in_one_thread_equals_the_per_level_launches(swept: bool) -> None:
+    """On the CPU the front refits every node in one launch (one thread, deepest nodes first) instead of one
+    launch per BVH level; the masks and normals must be the same bits as the level launches give."""
+    from pscc.collision._front_kernels import _refit_all_in_order, _refit_level
+
+    bvh, _, mesh, front = _setup("cpu", maker="twisted")
+    x0, x1 = _positions(mesh, 0.8, 0.002, seed=3)
+    end = wp.array(x1, dtype=wp.vec3, device="cpu") if swept else None
+    front.update(wp.array(x0, dtype=wp.vec3, device="cpu"), end)
+    args = front.args
+    count = bvh.node_count
+    by_level = (wp.zeros_like(front.node_mask), wp.zeros_like(front.node_normal))
+    offsets = bvh.level_offsets
+    for depth in range(len(offsets) - 2, -1, -1):
+        first, last = int(offsets[depth]), int(offsets[depth + 1])
+        if last > first:
+            wp.launch(_refit_level, dim=last - first, inputs=[args, first], outputs=list(by_level), device="cpu")
+    in_order = (wp.zeros_like(front.node_mask), wp.zeros_like(front.node_normal))
+    wp.launch(_refit_all_in_order, dim=1, inputs=[args, count], outputs=list(in_order), device="cpu")
+    for a, b in zip(by_level, in_order, strict=True):
+        assert np.array_equal(a.numpy().view(np.uint32), b.numpy().view(np.uint32))
+    assert np.array_equal(front.node_mask.numpy().view(np.uint32), in_order[0].numpy().view(np.uint32))
+    assert (in_order[0].numpy().view(np.uint32) != 0).any()
