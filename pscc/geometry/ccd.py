@@ -585,6 +585,20 @@ def _features_apart(
 
 
 @wp.func
+def _largest_motion(q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3,
+                    triangle_domain: int) -> float:
+    """max over the (u, v) domain of |F(1, u, v) - F(0, u, v)|: dF is linear in (u, v) and |dF| convex, so
+    the maximum is at a corner of the domain (three for a triangle, four for the unit square)."""
+    motion00 = q1 - q0
+    motion10 = motion00 + (e11 - e10)
+    motion01 = motion00 + (e21 - e20)
+    motion = wp.max(wp.length(motion00), wp.max(wp.length(motion10), wp.length(motion01)))
+    if triangle_domain == 0:
+        motion = wp.max(motion, wp.length(motion10 + (e21 - e20)))
+    return motion
+
+
+@wp.func
 def _motion_cannot_reach(
     distance_squared_t0: float,
     q0: wp.vec3,
@@ -611,12 +625,7 @@ def _motion_cannot_reach(
     """
     slack = wp.length(err)
     lower = wp.sqrt(wp.max(distance_squared_t0, 0.0)) - _DISTANCE_RELATIVE_ERROR * scale - 2.0 * slack
-    motion00 = q1 - q0
-    motion10 = motion00 + (e11 - e10)
-    motion01 = motion00 + (e21 - e20)
-    motion = wp.max(wp.length(motion00), wp.max(wp.length(motion10), wp.length(motion01)))
-    if triangle_domain == 0:
-        motion = wp.max(motion, wp.length(motion10 + (e21 - e20)))
+    motion = _largest_motion(q0, e10, e20, q1, e11, e21, triangle_domain)
     reach = (motion + 2.0 * slack) * (1.0 + _MOTION_MARGIN)
     return lower - reach > minimum_distance * (1.0 + _MOTION_MARGIN)
 
@@ -682,12 +691,7 @@ def _advance_to_contact(
     as for a box the search reports at its start.
     """
     slack = wp.length(err)
-    motion00 = q1 - q0
-    motion10 = motion00 + (e11 - e10)
-    motion01 = motion00 + (e21 - e20)
-    motion = wp.max(wp.length(motion00), wp.max(wp.length(motion10), wp.length(motion01)))
-    if triangle_domain == 0:
-        motion = wp.max(motion, wp.length(motion10 + (e21 - e20)))
+    motion = _largest_motion(q0, e10, e20, q1, e11, e21, triangle_domain)
     speed = (motion + 2.0 * slack) * (1.0 + _MOTION_MARGIN)
     floor = minimum_distance * (1.0 + _MOTION_MARGIN)
     band = 0.5 * distance_tolerance * minimum_distance
