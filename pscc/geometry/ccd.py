@@ -60,7 +60,11 @@ the largest coordinate magnitude after translating the query to its first point.
 wrappers add the rounding of float64 input to float32 when the input is not exactly float32, so
 the answer is conservative for the input as given.
 
-Every function here runs unchanged on CUDA and on the CPU.
+The stages live in their own modules: :mod:`pscc.geometry.ccd_filters` (swept box, motion bound, plane
+tests), :mod:`pscc.geometry.ccd_advance` (start-band guard, conservative advancement),
+:mod:`pscc.geometry.ccd_search` (box search) and :mod:`pscc.geometry.ccd_base` (parameters, margins).
+This module holds the per-query set-up, the two device functions and the host API. Every function here
+runs unchanged on CUDA and on the CPU.
 """
 
 from __future__ import annotations
@@ -70,46 +74,34 @@ import warp as wp
 
 from pscc import tolerances
 from pscc._checks import check_nonnegative, check_points
-from pscc.geometry import distance_tolerances
+from pscc.geometry.ccd_advance import advance_to_contact, query_distance_tolerance
+from pscc.geometry.ccd_base import MOTION_MARGIN, NO_HIT, CcdParameters, ccd_parameters
+from pscc.geometry.ccd_filters import (
+    coplanarity_sign,
+    features_apart,
+    motion_cannot_reach,
+    never_coplanar,
+    plane_keeps_distance,
+    vertex_plane_side,
+)
+from pscc.geometry.ccd_search import ccd_search
 from pscc.geometry.distance import edge_edge_distance_squared, vertex_face_distance_squared
 
+__all__ = [
+    "NO_HIT",
+    "CcdParameters",
+    "ccd_parameters",
+    "coplanarity_sign",
+    "edge_edge_ccd",
+    "edge_edge_ccd_toi",
+    "input_rounding_error",
+    "plane_keeps_distance",
+    "vertex_face_ccd",
+    "vertex_face_ccd_toi",
+    "vertex_plane_side",
+]
+
 wp.set_module_options({"enable_backward": False})
-
-_STACK = tolerances.CCD_STACK_SIZE
-_stack_vector = wp.types.vector(length=_STACK, dtype=wp.float32)
-
-NO_HIT: float = 2.0
-"""Value the device functions return as time of impact when there is no collision."""
-
-
-@wp.struct
-class CcdParameters:
-    """Tolerances of the CCD search (see :mod:`pscc.tolerances`), passed to every CCD kernel."""
-
-    rounding_factor: wp.float32
-    codomain_tolerance: wp.float32
-    min_parameter_width: wp.float32
-    comparison_margin: wp.float32
-    max_boxes: wp.int32
-    coplanarity_factor: wp.float32
-    toi_tolerance: wp.float32
-    plane_filter: wp.int32
-    distance_tolerance: wp.float32
-
-
-def ccd_parameters() -> CcdParameters:
-    """Return the default :class:`CcdParameters` filled from :mod:`pscc.tolerances`."""
-    params = CcdParameters()
-    params.rounding_factor = tolerances.CCD_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
-    params.codomain_tolerance = tolerances.CCD_CODOMAIN_TOLERANCE
-    params.min_parameter_width = tolerances.CCD_MIN_PARAMETER_WIDTH
-    params.comparison_margin = tolerances.DISTANCE_COMPARISON_MARGIN
-    params.max_boxes = tolerances.CCD_MAX_BOXES
-    params.coplanarity_factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
-    params.toi_tolerance = tolerances.CCD_TOI_TOLERANCE
-    params.plane_filter = 1
-    params.distance_tolerance = tolerances.CCD_DISTANCE_TOLERANCE
-    return params
 
 
 @wp.func
@@ -118,622 +110,9 @@ def _abs_max(m: wp.vec3, x: wp.vec3) -> wp.vec3:
 
 
 @wp.func
-def _lerp(x0: wp.vec3, x1: wp.vec3, t: float) -> wp.vec3:
-    # x0 + t (x1 - x0): the evaluation order the rounding bound was derived for.
-    return x0 + t * (x1 - x0)
-
-
-@wp.func
-def _gap_squared(lo: wp.vec3, hi: wp.vec3, err: wp.vec3) -> float:
-    """Squared distance from the origin to the box [lo - err, hi + err]."""
-    g = float(0.0)
-    for k in range(3):
-        below = lo[k] - err[k]
-        above = -(hi[k] + err[k])
-        d = wp.max(wp.max(below, above), 0.0)
-        g += d * d
-    return g
-
-
-@wp.func
-def _largest_change(
-    a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, c0: wp.vec3, c1: wp.vec3, d0: wp.vec3, d1: wp.vec3
-) -> float:
-    """Largest |component| of the differences x1 - x0 over four corner pairs along one parameter."""
-    m = wp.max(wp.max(wp.abs(a1 - a0), wp.abs(b1 - b0)), wp.max(wp.abs(c1 - c0), wp.abs(d1 - d0)))
-    return wp.max(m[0], wp.max(m[1], m[2]))
-
-
-@wp.func
-def _best_half_gap(
-    a0: wp.vec3,
-    a1: wp.vec3,
-    b0: wp.vec3,
-    b1: wp.vec3,
-    c0: wp.vec3,
-    c1: wp.vec3,
-    d0: wp.vec3,
-    d1: wp.vec3,
-    err: wp.vec3,
-) -> float:
-    """Larger squared gap of the two halves of a box split between the corner pairs (x0, x1).
-
-    Used only to choose the split (a heuristic): exclusion always re-evaluates F.
-    """
-    ma = 0.5 * (a0 + a1)
-    mb = 0.5 * (b0 + b1)
-    mc = 0.5 * (c0 + c1)
-    md = 0.5 * (d0 + d1)
-    mid_lo = wp.min(wp.min(ma, mb), wp.min(mc, md))
-    mid_hi = wp.max(wp.max(ma, mb), wp.max(mc, md))
-    low_lo = wp.min(mid_lo, wp.min(wp.min(a0, b0), wp.min(c0, d0)))
-    low_hi = wp.max(mid_hi, wp.max(wp.max(a0, b0), wp.max(c0, d0)))
-    high_lo = wp.min(mid_lo, wp.min(wp.min(a1, b1), wp.min(c1, d1)))
-    high_hi = wp.max(mid_hi, wp.max(wp.max(a1, b1), wp.max(c1, d1)))
-    return wp.max(_gap_squared(low_lo, low_hi, err), _gap_squared(high_lo, high_hi, err))
-
-
-@wp.func
-def _abs_cross(a: wp.vec3, b: wp.vec3) -> wp.vec3:
-    """Componentwise |a_y b_z| + |a_z b_y| etc.: the magnitude companion of a cross product."""
-    return wp.vec3(
-        wp.abs(a[1] * b[2]) + wp.abs(a[2] * b[1]),
-        wp.abs(a[2] * b[0]) + wp.abs(a[0] * b[2]),
-        wp.abs(a[0] * b[1]) + wp.abs(a[1] * b[0]),
-    )
-
-
-@wp.func
-def _abs_dot(a: wp.vec3, b: wp.vec3) -> float:
-    return wp.abs(a[0] * b[0]) + wp.abs(a[1] * b[1]) + wp.abs(a[2] * b[2])
-
-
-@wp.func
-def _strict_sign(value: float, magnitude: float, factor: float) -> float:
-    """Sign of ``value`` when it exceeds its rounding bound ``factor * magnitude``, else 0."""
-    bound = factor * magnitude
-    if value > bound:
-        return 1.0
-    if value < -bound:
-        return -1.0
-    return 0.0
-
-
-@wp.func
-def coplanarity_sign(
-    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, factor: float
-) -> float:
-    """Strict sign that (e1(t) x e2(t)) . q(t) keeps over the whole step, or 0 if not provable.
-
-    This coplanarity function is a cubic with Bernstein coefficients k0 = n0.q0,
-    3 k1 = 2 nX.q0 + n0.q1, 3 k2 = 2 nX.q1 + n1.q0, k3 = n1.q1 (nX the middle control normal).
-    When all four have one strict sign, the cubic keeps that sign on [0, 1]: for q = p - a,
-    e1 = a - b, e2 = a - c, the point p stays strictly on one side of the moving plane of (a, b, c).
-    Each value is trusted only beyond ``factor x`` its magnitude companion (the same sums of
-    products with absolute values): at most 10 roundings separate each value from the exact float32
-    input, so its error is below gamma_10 = 10 u times that companion; ``factor`` = 16 u covers it
-    (see ``docs/ccd.md``).
-    """
-    de1 = e11 - e10
-    de2 = e21 - e20
-    n0 = wp.cross(e10, e20)
-    n1 = wp.cross(e11, e21)
-    nx = 0.5 * ((n0 + n1) - wp.cross(de1, de2))
-    m0 = _abs_cross(e10, e20)
-    m1 = _abs_cross(e11, e21)
-    mx = 0.5 * ((m0 + m1) + _abs_cross(de1, de2))
-    s0 = _strict_sign(wp.dot(n0, q0), _abs_dot(m0, q0), factor)
-    if s0 == 0.0:
-        return 0.0
-    s3 = _strict_sign(wp.dot(n1, q1), _abs_dot(m1, q1), factor)
-    if s3 != s0:
-        return 0.0
-    s1 = _strict_sign(2.0 * wp.dot(nx, q0) + wp.dot(n0, q1), 2.0 * _abs_dot(mx, q0) + _abs_dot(m0, q1), factor)
-    if s1 != s0:
-        return 0.0
-    s2 = _strict_sign(2.0 * wp.dot(nx, q1) + wp.dot(n1, q0), 2.0 * _abs_dot(mx, q1) + _abs_dot(m1, q0), factor)
-    if s2 != s0:
-        return 0.0
-    return s0
-
-
-@wp.func
-def _beyond(value: float, threshold: float, magnitude: float, factor: float, side: float) -> bool:
-    """Whether ``side * value`` provably exceeds ``threshold`` (>= 0) despite ``value``'s rounding
-    (``factor x magnitude``) and the one rounding of the comparison's subtraction."""
-    return side * value - threshold * (1.0 + _MOTION_MARGIN) > factor * magnitude * (1.0 + _MOTION_MARGIN)
-
-
-@wp.func
-def plane_keeps_distance(
-    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, distance: float,
-    factor: float,
-) -> bool:
-    """True when q(t) stays farther than ``distance`` from the moving plane spanned by e1(t) and e2(t)
-    over the whole step (the deforming non-penetration filter of Tang et al. 2010, with a distance).
-
-    The plane's distance is (n . q) / |n| with n(t) = e1(t) x e2(t), a quadratic whose Bernstein control
-    points are n0, nX, n1, so |n(t)| <= N = max(|n0|, |nX|, |n1|) (each grown by its rounding bound);
-    n . q is the cubic of :func:`coplanarity_sign` with Bernstein coefficients k0..k3. If every k_i
-    exceeds ``distance x N`` with one sign, then |n . q| > distance |n| for every t in [0, 1]. The point
-    (vertex-face) or the line (edge-edge) then stays farther than ``distance`` from the plane holding the
-    triangle (the other line), so from the triangle (the other edge). Each k_i is trusted beyond
-    ``factor x`` its magnitude companion, as in :func:`coplanarity_sign`.
-    """
-    de1 = e11 - e10
-    de2 = e21 - e20
-    n0 = wp.cross(e10, e20)
-    n1 = wp.cross(e11, e21)
-    nx = 0.5 * ((n0 + n1) - wp.cross(de1, de2))
-    m0 = _abs_cross(e10, e20)
-    m1 = _abs_cross(e11, e21)
-    mx = 0.5 * ((m0 + m1) + _abs_cross(de1, de2))
-    normal_bound = wp.max(wp.length(n0) + factor * wp.length(m0),
-                          wp.max(wp.length(nx) + factor * wp.length(mx), wp.length(n1) + factor * wp.length(m1)))
-    reach = distance * normal_bound * (1.0 + _MOTION_MARGIN)
-    value0 = wp.dot(n0, q0)
-    side = float(1.0)
-    if value0 < 0.0:
-        side = -1.0
-    if not _beyond(value0, reach, _abs_dot(m0, q0), factor, side):
-        return False
-    if not _beyond(wp.dot(n1, q1), reach, _abs_dot(m1, q1), factor, side):
-        return False
-    if not _beyond(2.0 * wp.dot(nx, q0) + wp.dot(n0, q1), 3.0 * reach, 2.0 * _abs_dot(mx, q0) + _abs_dot(m0, q1),
-                   factor, side):
-        return False
-    return _beyond(2.0 * wp.dot(nx, q1) + wp.dot(n1, q0), 3.0 * reach, 2.0 * _abs_dot(mx, q1) + _abs_dot(m1, q0),
-                   factor, side)
-
-
-@wp.func
-def _never_coplanar(
-    q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3, factor: float
-) -> bool:
-    """True when the four points provably never become coplanar during the step."""
-    return coplanarity_sign(q0, e10, e20, q1, e11, e21, factor) != 0.0
-
-
-@wp.func
-def vertex_plane_side(
-    p_t0: wp.vec3,
-    a_t0: wp.vec3,
-    b_t0: wp.vec3,
-    c_t0: wp.vec3,
-    p_t1: wp.vec3,
-    a_t1: wp.vec3,
-    b_t1: wp.vec3,
-    c_t1: wp.vec3,
-    params: CcdParameters,
-) -> float:
-    """+1 or -1 when vertex p provably stays strictly on that side of the moving plane of triangle
-    (a, b, c) during the whole step (coordinates translated to ``a_t0`` first), else 0."""
-    r = a_t0
-    ya0 = a_t0 - r
-    ya1 = a_t1 - r
-    return coplanarity_sign((p_t0 - r) - ya0, ya0 - (b_t0 - r), ya0 - (c_t0 - r),
-                            (p_t1 - r) - ya1, ya1 - (b_t1 - r), ya1 - (c_t1 - r), params.coplanarity_factor)
-
-
-@wp.func
-def _direction_separates(
-    d: wp.vec3,
-    f000: wp.vec3,
-    f010: wp.vec3,
-    f001: wp.vec3,
-    f011: wp.vec3,
-    f100: wp.vec3,
-    f110: wp.vec3,
-    f101: wp.vec3,
-    f111: wp.vec3,
-    lo: wp.vec3,
-    hi: wp.vec3,
-    err: wp.vec3,
-    minimum_distance: float,
-    params: CcdParameters,
-) -> bool:
-    """True when every corner projects onto ``d`` beyond ``minimum_distance |d|``, with bounds.
-
-    The exact corner values differ from the computed ones by at most ``err`` per axis, and each
-    computed projection (3 products, 2 sums) by at most 4 u times sum |d_k| max|f_k|; both are
-    subtracted before the comparison (4 u is written as 2^-22).
-    """
-    m = wp.min(wp.min(wp.min(wp.dot(d, f000), wp.dot(d, f010)), wp.min(wp.dot(d, f001), wp.dot(d, f011))),
-               wp.min(wp.min(wp.dot(d, f100), wp.dot(d, f110)), wp.min(wp.dot(d, f101), wp.dot(d, f111))))
-    if m <= 0.0:
-        return False
-    magnitude = wp.max(wp.abs(lo), wp.abs(hi))
-    slack = float(0.0)
-    for k in range(3):
-        slack += wp.abs(d[k]) * (err[k] + 2.384185791015625e-07 * magnitude[k])
-    bound = minimum_distance * wp.length(d) * (1.0 + params.comparison_margin)
-    return (m - slack) * (1.0 - params.comparison_margin) > bound
-
-
-@wp.func
-def _root_gap_squared(q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3,
-                      err: wp.vec3) -> float:
-    """Squared gap of the whole (t, u, v) in [0, 1]^3 box, evaluated exactly as the search does."""
-    qa = _lerp(q0, q1, 0.0)
-    qb = _lerp(q0, q1, 1.0)
-    e1a = _lerp(e10, e11, 0.0)
-    e1b = _lerp(e10, e11, 1.0)
-    e2a = _lerp(e20, e21, 0.0)
-    e2b = _lerp(e20, e21, 1.0)
-    lo = wp.min(wp.min(qa, qa + e1a), wp.min(qa + e2a, qa + e1a + e2a))
-    hi = wp.max(wp.max(qa, qa + e1a), wp.max(qa + e2a, qa + e1a + e2a))
-    lo = wp.min(lo, wp.min(wp.min(qb, qb + e1b), wp.min(qb + e2b, qb + e1b + e2b)))
-    hi = wp.max(hi, wp.max(wp.max(qb, qb + e1b), wp.max(qb + e2b, qb + e1b + e2b)))
-    return _gap_squared(lo, hi, err)
-
-
-@wp.func
-def _ccd_search(
-    q0: wp.vec3,
-    e10: wp.vec3,
-    e20: wp.vec3,
-    q1: wp.vec3,
-    e11: wp.vec3,
-    e21: wp.vec3,
-    triangle_domain: int,
-    err: wp.vec3,
-    scale: float,
-    minimum_distance: float,
-    distance_tolerance: float,
-    t_start: float,
-    params: CcdParameters,
-) -> float:
-    """Earliest t >= ``t_start`` at which |q(t) + u e1(t) + v e2(t)| <= d_min may hold; ``NO_HIT`` if never
-    (earlier times must be excluded already).
-
-    q, e1, e2 are given at t = 0 and t = 1 and are evaluated at t by the exact expressions the
-    rounding bound assumes. ``triangle_domain`` = 1 restricts (u, v) to u + v <= 1.
-    ``distance_tolerance`` is this query's :data:`~pscc.tolerances.CCD_DISTANCE_TOLERANCE` (0: exact
-    refinement).
-    """
-    ms_sq = minimum_distance * minimum_distance * (1.0 + params.comparison_margin)
-    # Most candidate pairs are excluded by the whole box already: test it before building the stack.
-    if _root_gap_squared(q0, e10, e20, q1, e11, e21, err) * (1.0 - params.comparison_margin) > ms_sq:
-        return 2.0
-    stack_t0 = _stack_vector()
-    stack_t1 = _stack_vector()
-    stack_u0 = _stack_vector()
-    stack_u1 = _stack_vector()
-    stack_v0 = _stack_vector()
-    stack_v1 = _stack_vector()
-    stack_t0[0] = t_start
-    stack_t1[0] = 1.0
-    stack_u0[0] = 0.0
-    stack_u1[0] = 1.0
-    stack_v0[0] = 0.0
-    stack_v1[0] = 1.0
-    count = int(1)
-    best = float(2.0)
-    boxes = int(0)
-    tolerance = params.codomain_tolerance * scale
-    # With d_min > 0 a box whose image is below a fraction of d_min is only refined in t, down to the
-    # time-of-impact tolerance (its reported start time stays that close to the box's contact).
-    coarse_tolerance = wp.max(tolerance, distance_tolerance * minimum_distance)
-    min_width = params.min_parameter_width
-
-    while count > 0:
-        count -= 1
-        t0 = stack_t0[count]
-        t1 = stack_t1[count]
-        u0 = stack_u0[count]
-        u1 = stack_u1[count]
-        v0 = stack_v0[count]
-        v1 = stack_v1[count]
-        if t0 >= best:
-            continue
-        if best <= 1.0 and t0 >= best - params.toi_tolerance:
-            # A contact is already known; this box could only move it earlier by less than the
-            # time-of-impact tolerance, so report the box's start instead of refining it.
-            best = t0
-            continue
-        # Only times before the best collision found so far still matter.
-        t1 = wp.min(t1, best)
-        if triangle_domain == 1 and u0 + v0 > 1.0:
-            continue
-        boxes += 1
-        if boxes > params.max_boxes:
-            # Budget spent: report the earliest time not yet excluded (conservative).
-            best = wp.min(best, t0)
-            for s in range(count):
-                best = wp.min(best, stack_t0[s])
-            count = 0
-            continue
-
-        # F at the 8 corners, named f_<t><u><v> with 0 = lower and 1 = upper end of the range.
-        qa = _lerp(q0, q1, t0)
-        qb = _lerp(q0, q1, t1)
-        e1a = _lerp(e10, e11, t0)
-        e1b = _lerp(e10, e11, t1)
-        e2a = _lerp(e20, e21, t0)
-        e2b = _lerp(e20, e21, t1)
-        f000 = qa + u0 * e1a + v0 * e2a
-        f010 = qa + u1 * e1a + v0 * e2a
-        f001 = qa + u0 * e1a + v1 * e2a
-        f011 = qa + u1 * e1a + v1 * e2a
-        f100 = qb + u0 * e1b + v0 * e2b
-        f110 = qb + u1 * e1b + v0 * e2b
-        f101 = qb + u0 * e1b + v1 * e2b
-        f111 = qb + u1 * e1b + v1 * e2b
-        lo_a = wp.min(wp.min(f000, f010), wp.min(f001, f011))
-        lo = wp.min(lo_a, wp.min(wp.min(f100, f110), wp.min(f101, f111)))
-        hi_a = wp.max(wp.max(f000, f010), wp.max(f001, f011))
-        hi = wp.max(hi_a, wp.max(wp.max(f100, f110), wp.max(f101, f111)))
-
-        gap_sq = _gap_squared(lo, hi, err)
-        if gap_sq * (1.0 - params.comparison_margin) > ms_sq:
-            continue  # certainly farther than d_min everywhere in this box
-        # The image of F over the box lies in the convex hull of its 8 corner values (F is
-        # multilinear), so any direction d whose corner projections all exceed d_min |d| separates
-        # the box from the origin. d = F at the box centre sees gaps along tilted directions that
-        # the axis-aligned test above misses.
-        d = 0.125 * (((f000 + f010) + (f001 + f011)) + ((f100 + f110) + (f101 + f111)))
-        if _direction_separates(d, f000, f010, f001, f011, f100, f110, f101, f111, lo, hi, err, minimum_distance,
-                                params):
-            continue
-
-        width = hi - lo
-        small = width[0] <= tolerance and width[1] <= tolerance and width[2] <= tolerance
-        # Largest change of F along each parameter (F is linear in each one).
-        change_t = _largest_change(f000, f100, f010, f110, f001, f101, f011, f111)
-        coarse = width[0] <= coarse_tolerance and width[1] <= coarse_tolerance and width[2] <= coarse_tolerance
-        if coarse and ((t1 - t0) <= params.toi_tolerance or change_t == 0.0):
-            small = True  # (F constant in t: a contact in the box is there at t0 already)
-        change_u = _largest_change(f000, f010, f100, f110, f001, f011, f101, f111)
-        change_v = _largest_change(f000, f001, f100, f101, f010, f011, f110, f111)
-        can_t = (t1 - t0) > min_width and change_t > 0.0
-        can_u = (u1 - u0) > min_width and change_u > 0.0
-        can_v = (v1 - v0) > min_width and change_v > 0.0
-        if small or not (can_t or can_u or can_v) or count + 2 > _STACK:
-            best = wp.min(best, t0)  # cannot exclude and cannot (or need not) refine: collision
-            continue
-
-        # Choose the split: t when one of its halves can be excluded at once (the halves' corner
-        # values are averages of the parent's, as F is linear in t), else the parameter that
-        # moves F the most.
-        axis = int(-1)
-        biggest = float(-1.0)
-        if coarse and (t1 - t0) > params.toi_tolerance:
-            axis = 0  # small enough in F: only its start time is still too coarse
-        elif can_t:
-            gain_t = _best_half_gap(f000, f100, f010, f110, f001, f101, f011, f111, err)
-            if gain_t * (1.0 - params.comparison_margin) > ms_sq:
-                axis = 0
-        if axis < 0:
-            if can_t and change_t > biggest:
-                axis = 0
-                biggest = change_t
-            if can_u and change_u > biggest:
-                axis = 1
-                biggest = change_u
-            if can_v and change_v > biggest:
-                axis = 2
-                biggest = change_v
-        # Push the later half first so the earlier one is searched first.
-        for half in range(2):
-            nt0 = t0
-            nt1 = t1
-            nu0 = u0
-            nu1 = u1
-            nv0 = v0
-            nv1 = v1
-            if axis == 0:
-                mid = 0.5 * (t0 + t1)
-                if half == 0:
-                    nt0 = mid
-                else:
-                    nt1 = mid
-            elif axis == 1:
-                mid = 0.5 * (u0 + u1)
-                if half == 0:
-                    nu0 = mid
-                else:
-                    nu1 = mid
-            else:
-                mid = 0.5 * (v0 + v1)
-                if half == 0:
-                    nv0 = mid
-                else:
-                    nv1 = mid
-            stack_t0[count] = nt0
-            stack_t1[count] = nt1
-            stack_u0[count] = nu0
-            stack_u1[count] = nu1
-            stack_v0[count] = nv0
-            stack_v1[count] = nv1
-            count += 1
-    return best
-
-
-@wp.func
 def _query_error(scale_axes: wp.vec3, extra_error: float, params: CcdParameters) -> wp.vec3:
     """Per-axis bound on |F_float32 - F_exact| for a query of per-axis magnitude ``scale_axes``."""
     return params.rounding_factor * scale_axes + wp.vec3(extra_error, extra_error, extra_error)
-
-
-_DISTANCE_RELATIVE_ERROR = wp.constant(distance_tolerances.ILL_CONDITIONED_REL_ERROR
-                                       + distance_tolerances.DISTANCE_ERROR_CONST * distance_tolerances.EPS32)
-_MOTION_MARGIN = wp.constant(1.0e-5)
-_SQRT3 = wp.constant(1.7320508)
-_WELL_SHAPED_DISTANCE_ERROR = wp.constant(distance_tolerances.DISTANCE_ERROR_CONST * distance_tolerances.EPS32)
-_ADVANCE_STEPS = wp.constant(tolerances.CCD_ADVANCE_STEPS)
-_WELL_SHAPED_FLATNESS_CHECK = wp.constant(2.0 * distance_tolerances.WELL_SHAPED_MIN_FLATNESS)
-
-
-@wp.func
-def _features_apart(
-    lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3, extra_error: float, minimum_distance: float
-) -> bool:
-    """Swept-box exclusion (module docstring): True when boxes [lo_a, hi_a] and [lo_b, hi_b] of two
-    features' start and end positions are provably farther apart than ``minimum_distance``.
-
-    Each axis gap is computed with one rounding (relative error at most 2^-24), reduced by twice the
-    input rounding ``extra_error`` (with the margin), squared and summed (a few more roundings); the
-    relative margin :data:`_MOTION_MARGIN` (1e-5) covers them all. Coordinates must be finite, as
-    for the whole CCD (the host API refuses others; the broad phase flags their boxes).
-    """
-    slack = 2.0 * extra_error * (1.0 + _MOTION_MARGIN)
-    gap_squared = float(0.0)
-    for k in range(3):
-        d = wp.max(wp.max(lo_b[k] - hi_a[k], lo_a[k] - hi_b[k]) - slack, 0.0)
-        gap_squared += d * d
-    return gap_squared > minimum_distance * minimum_distance * (1.0 + _MOTION_MARGIN)
-
-
-@wp.func
-def _largest_motion(q0: wp.vec3, e10: wp.vec3, e20: wp.vec3, q1: wp.vec3, e11: wp.vec3, e21: wp.vec3,
-                    triangle_domain: int) -> float:
-    """max over the (u, v) domain of |F(1, u, v) - F(0, u, v)|: dF is linear in (u, v) and |dF| convex, so
-    the maximum is at a corner of the domain (three for a triangle, four for the unit square)."""
-    motion00 = q1 - q0
-    motion10 = motion00 + (e11 - e10)
-    motion01 = motion00 + (e21 - e20)
-    motion = wp.max(wp.length(motion00), wp.max(wp.length(motion10), wp.length(motion01)))
-    if triangle_domain == 0:
-        motion = wp.max(motion, wp.length(motion10 + (e21 - e20)))
-    return motion
-
-
-@wp.func
-def _motion_cannot_reach(
-    distance_squared_t0: float,
-    q0: wp.vec3,
-    e10: wp.vec3,
-    e20: wp.vec3,
-    q1: wp.vec3,
-    e11: wp.vec3,
-    e21: wp.vec3,
-    triangle_domain: int,
-    err: wp.vec3,
-    scale: float,
-    minimum_distance: float,
-) -> bool:
-    """Motion-bound exclusion: True when the pair provably stays farther than ``minimum_distance``.
-
-    With F(t, u, v) = F0(u, v) + t dF(u, v), |F| >= dist_t0 - max |dF| for t in [0, 1], and |dF| is
-    convex and linear in (u, v), so its maximum over the domain is at a corner. ``dist_t0`` is bounded
-    from below by the float32 distance minus the distance functions' documented error
-    (``ILL_CONDITIONED_REL_ERROR + 16 EPS32`` times the local scale) and the rounding bound of F;
-    |dF| is bounded from above by its corner values plus twice that rounding bound, with a relative
-    margin. A resting or slowly moving pair whose gap exceeds its motion is thus excluded without the
-    box search (the costly case of grazing contacts); any pair that could come within
-    ``minimum_distance`` is left to the search.
-    """
-    slack = wp.length(err)
-    lower = wp.sqrt(wp.max(distance_squared_t0, 0.0)) - _DISTANCE_RELATIVE_ERROR * scale - 2.0 * slack
-    motion = _largest_motion(q0, e10, e20, q1, e11, e21, triangle_domain)
-    reach = (motion + 2.0 * slack) * (1.0 + _MOTION_MARGIN)
-    return lower - reach > minimum_distance * (1.0 + _MOTION_MARGIN)
-
-
-@wp.func
-def _distance_error(e1: wp.vec3, e2: wp.vec3, triangle_domain: int, scale: float) -> float:
-    """How far the float32 distance of :mod:`pscc.geometry.distance` may exceed the exact distance of its
-    input, for F = q + u e1 + v e2 seen as a point and a triangle (q against 0, -e1, -e2) or as two segments
-    (q to q + e1 against 0 to -e2).
-
-    Its documented bounds: ``DISTANCE_ERROR_CONST EPS32 L`` for edge pairs and for well-shaped triangles
-    (flatness |e1 x e2|^2 / longest edge^4 at least ``WELL_SHAPED_MIN_FLATNESS``, here required twice over so
-    that the float32 flatness cannot pass a triangle that is not), ``ILL_CONDITIONED_REL_ERROR L`` for the
-    others. L <= 4 ``scale``: every coordinate of q, e1, e2 is a difference of two coordinates of at most
-    ``scale``.
-    """
-    if triangle_domain == 1:
-        n = wp.cross(e1, e2)
-        e3 = e1 - e2
-        longest = wp.max(wp.dot(e1, e1), wp.max(wp.dot(e2, e2), wp.dot(e3, e3)))
-        if not (wp.dot(n, n) >= _WELL_SHAPED_FLATNESS_CHECK * longest * longest):
-            return _DISTANCE_RELATIVE_ERROR * 4.0 * scale
-    return _WELL_SHAPED_DISTANCE_ERROR * 4.0 * scale
-
-
-@wp.func
-def _distance_at(q: wp.vec3, e1: wp.vec3, e2: wp.vec3, triangle_domain: int) -> float:
-    """The float32 min |F| over the (u, v) domain (see :func:`_distance_error` for the two views)."""
-    zero = wp.vec3(0.0, 0.0, 0.0)
-    distance_squared = float(0.0)
-    if triangle_domain == 1:
-        distance_squared = vertex_face_distance_squared(q, zero, -e1, -e2)
-    else:
-        distance_squared = edge_edge_distance_squared(q, q + e1, zero, -e2)
-    return wp.sqrt(wp.max(distance_squared, 0.0))
-
-
-@wp.func
-def _advance_to_contact(
-    q0: wp.vec3,
-    e10: wp.vec3,
-    e20: wp.vec3,
-    q1: wp.vec3,
-    e11: wp.vec3,
-    e21: wp.vec3,
-    triangle_domain: int,
-    err: wp.vec3,
-    scale: float,
-    minimum_distance: float,
-    distance_tolerance: float,
-) -> float:
-    """Conservative advancement in t (with a distance tolerance): the first time the pair may come within
-    ``minimum_distance``, or ``NO_HIT``, or ``-1 - t`` when undecided after ``_ADVANCE_STEPS`` steps (all of
-    [0, t) is then excluded).
-
-    For fixed (u, v), F is linear in t, so min |F| at time s is at least the lower bound D(t) at time t
-    minus |s - t| times the largest |dF/dt| over the domain (a corner value, see
-    :func:`_motion_cannot_reach`, grown by twice the rounding bound). Every step therefore excludes
-    [t, t + (D(t) - d_min) / speed) and jumps to its end. The advancement stops with a contact at t once
-    D(t) is within half the tolerance of d_min: the exact distance at t is then below
-    ``d_min (1 + distance_tolerance)`` (the bound's own error is required to be below a quarter of the
-    tolerance, else the search is left to the boxes). The reported t is a lower bound of the first contact,
-    as for a box the search reports at its start.
-    """
-    slack = wp.length(err)
-    motion = _largest_motion(q0, e10, e20, q1, e11, e21, triangle_domain)
-    speed = (motion + 2.0 * slack) * (1.0 + _MOTION_MARGIN)
-    floor = minimum_distance * (1.0 + _MOTION_MARGIN)
-    band = 0.5 * distance_tolerance * minimum_distance
-    t = float(0.0)
-    for _step in range(_ADVANCE_STEPS):
-        q = _lerp(q0, q1, t)
-        e1 = _lerp(e10, e11, t)
-        e2 = _lerp(e20, e21, t)
-        # The float32 distance errs by the distance function's bound, and its input differs from the exact
-        # F by the rounding bound err (counted twice, as in _motion_cannot_reach). That error must leave
-        # room in the band, else the boxes take over from t.
-        error = _distance_error(e1, e2, triangle_domain, scale) + 2.0 * slack
-        if 2.0 * error > band:
-            return -1.0 - t
-        gap = _distance_at(q, e1, e2, triangle_domain) - error - floor
-        if gap <= band:
-            return t
-        if gap >= speed * (1.0 - t):
-            return 2.0  # the rest of the step is excluded at once (also when nothing moves)
-        # [t, t + gap / speed) is excluded; shortened by a relative 1e-5 against the rounding of the sum.
-        t = t + (gap / speed) * (1.0 - _MOTION_MARGIN)
-    return -1.0 - t
-
-
-@wp.func
-def _query_distance_tolerance(distance_squared_t0: float, err: wp.vec3, scale: float, minimum_distance: float,
-                              params: CcdParameters) -> float:
-    """The distance tolerance of one query: ``params.distance_tolerance``, or 0 when the pair may start
-    inside the band the tolerance leaves ambiguous.
-
-    A coarse box is reported when it is within about ``d_min (1 + tol sqrt 3)``; a pair that starts that
-    close (but farther than d_min) would be reported at t = 0 whatever the response does to its end
-    positions, round after round. So a pair whose start distance is not provably above
-    ``d_min (1 + 2 tol sqrt 3)`` (lower bound as in :func:`_motion_cannot_reach`) is refined exactly, and
-    the tolerance only speeds up pairs that start clear of the band.
-    """
-    tolerance = params.distance_tolerance
-    if tolerance > 0.0:
-        lower = wp.sqrt(wp.max(distance_squared_t0, 0.0)) - _DISTANCE_RELATIVE_ERROR * scale - 2.0 * wp.length(err)
-        if lower <= minimum_distance * (1.0 + 1.0 * _SQRT3 * tolerance) * (1.0 + _MOTION_MARGIN):
-            tolerance = 0.0
-    return tolerance
 
 
 @wp.func
@@ -759,27 +138,27 @@ def _ccd_from_differences(
     """
     err = _query_error(magnitude, extra_error, params)
     scale = wp.max(magnitude[0], wp.max(magnitude[1], magnitude[2]))
-    if _motion_cannot_reach(distance_squared_t0, q0, e10, e20, q1, e11, e21, triangle_domain, err, scale,
+    if motion_cannot_reach(distance_squared_t0, q0, e10, e20, q1, e11, e21, triangle_domain, err, scale,
                             minimum_distance):
         return 2.0
     if minimum_distance == 0.0 and extra_error == 0.0:
-        if _never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
+        if never_coplanar(q0, e10, e20, q1, e11, e21, params.coplanarity_factor):
             return 2.0
     elif params.plane_filter != 0:
         # F_exact differs from F evaluated on the float inputs by at most |err| (twice, as in the motion bound).
         if plane_keeps_distance(q0, e10, e20, q1, e11, e21,
-                                minimum_distance * (1.0 + _MOTION_MARGIN) + 2.0 * wp.length(err),
+                                minimum_distance * (1.0 + MOTION_MARGIN) + 2.0 * wp.length(err),
                                 params.coplanarity_factor):
             return 2.0
-    distance_tolerance = _query_distance_tolerance(distance_squared_t0, err, scale, minimum_distance, params)
+    distance_tolerance = query_distance_tolerance(distance_squared_t0, err, scale, minimum_distance, params)
     t_start = float(0.0)
     if distance_tolerance > 0.0:
-        t_start = _advance_to_contact(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance,
+        t_start = advance_to_contact(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance,
                                       distance_tolerance)
         if t_start >= 0.0:
             return t_start  # a contact (or NO_HIT, 2.0) decided by the advancement
         t_start = -t_start - 1.0  # undecided: the box search goes on from there
-    return _ccd_search(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance,
+    return ccd_search(q0, e10, e20, q1, e11, e21, triangle_domain, err, scale, minimum_distance,
                        distance_tolerance, t_start, params)
 
 
@@ -806,7 +185,7 @@ def vertex_face_ccd_toi(
     """
     face_lo = wp.min(wp.min(wp.min(a_t0, b_t0), wp.min(c_t0, a_t1)), wp.min(b_t1, c_t1))
     face_hi = wp.max(wp.max(wp.max(a_t0, b_t0), wp.max(c_t0, a_t1)), wp.max(b_t1, c_t1))
-    if _features_apart(wp.min(p_t0, p_t1), wp.max(p_t0, p_t1), face_lo, face_hi, extra_error, minimum_distance):
+    if features_apart(wp.min(p_t0, p_t1), wp.max(p_t0, p_t1), face_lo, face_hi, extra_error, minimum_distance):
         return 2.0
     r = p_t0
     yp0 = p_t0 - r
@@ -850,7 +229,7 @@ def edge_edge_ccd_toi(
 
     See :func:`vertex_face_ccd_toi` for ``extra_error`` and the static use.
     """
-    if _features_apart(wp.min(wp.min(a0_t0, a1_t0), wp.min(a0_t1, a1_t1)),
+    if features_apart(wp.min(wp.min(a0_t0, a1_t0), wp.min(a0_t1, a1_t1)),
                        wp.max(wp.max(a0_t0, a1_t0), wp.max(a0_t1, a1_t1)),
                        wp.min(wp.min(b0_t0, b1_t0), wp.min(b0_t1, b1_t1)),
                        wp.max(wp.max(b0_t0, b1_t0), wp.max(b0_t1, b1_t1)), extra_error, minimum_distance):
