@@ -74,6 +74,7 @@ import warp as wp
 
 from pscc import tolerances
 from pscc._checks import check_nonnegative, check_points
+from pscc.errors import InputError
 from pscc.geometry.ccd_advance import advance_to_contact, query_distance_tolerance
 from pscc.geometry.ccd_base import MOTION_MARGIN, NO_HIT, CcdParameters, ccd_parameters
 from pscc.geometry.ccd_filters import (
@@ -330,11 +331,16 @@ def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device,
     x0 = check_points(raw_t0, "points_t0", shape_tail=(4, 3))
     x1 = check_points(raw_t1, "points_t1", shape_tail=(4, 3))
     if x0.shape != x1.shape:
-        from pscc.errors import InputError
-
         raise InputError("argument", "points_t1", f"shape {x1.shape} differs from points_t0 {x0.shape}",
                          "pass start and end positions of the same queries")
     distance = check_nonnegative(minimum_distance, "minimum_distance")
+    if distance_tolerance is not None:
+        distance_tolerance = check_nonnegative(distance_tolerance, "distance_tolerance")
+        if distance_tolerance >= 1.0:
+            raise InputError("argument", "distance_tolerance",
+                             f"{distance_tolerance!r} is not below 1 (contacts would be reported up to "
+                             f"{1.0 + distance_tolerance:g} x minimum_distance apart)",
+                             "pass a fraction of the minimum distance such as 0.1, or 0 for exact refinement")
     count = x0.shape[0]
     if count == 0:
         return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.float32)
@@ -344,7 +350,7 @@ def _run_ccd(kernel, points_t0, points_t1, minimum_distance, device,
     params = ccd_parameters()
     params.plane_filter = int(bool(plane_filter))
     if distance_tolerance is not None:
-        params.distance_tolerance = float(check_nonnegative(distance_tolerance, "distance_tolerance"))
+        params.distance_tolerance = float(distance_tolerance)
     wp.launch(
         kernel,
         dim=count,
@@ -383,15 +389,16 @@ def vertex_face_ccd(
         plane_filter: exclude pairs whose features provably stay farther than ``minimum_distance`` from
             each other's moving plane before the search (:func:`plane_keeps_distance`; False: the
             search decides every pair, for comparisons).
-        distance_tolerance: :data:`pscc.tolerances.CCD_DISTANCE_TOLERANCE` for this call (``None``: the
-            default).
+        distance_tolerance: :data:`pscc.tolerances.CCD_DISTANCE_TOLERANCE` for this call, in [0, 1) (``None``:
+            the default; 0: every contact refined exactly).
 
     Returns:
         ``(hit, toi)``: (n,) bool and (n,) float32. ``toi`` is a lower bound of the first time of
         contact for hits and ``inf`` otherwise. Never misses a contact of the input as given.
 
     Raises:
-        InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
+        InputError: bad shapes, NaN/Inf, a negative ``minimum_distance``, or a ``distance_tolerance``
+            outside [0, 1).
     """
     return _run_ccd(_vertex_face_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter,
                     distance_tolerance)
@@ -420,7 +427,8 @@ def edge_edge_ccd(
         ``(hit, toi)`` as in :func:`vertex_face_ccd`.
 
     Raises:
-        InputError: bad shapes, NaN/Inf, or a negative ``minimum_distance``.
+        InputError: bad shapes, NaN/Inf, a negative ``minimum_distance``, or a ``distance_tolerance``
+            outside [0, 1).
     """
     return _run_ccd(_edge_edge_ccd_kernel, points_t0, points_t1, minimum_distance, device, plane_filter,
                     distance_tolerance)

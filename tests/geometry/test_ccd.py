@@ -219,6 +219,9 @@ def test_empty_batch_and_bad_input() -> None:
         edge_edge_ccd(bad, np.zeros((1, 4, 3)))
     with pytest.raises(InputError, match="minimum_distance"):
         edge_edge_ccd(np.zeros((1, 4, 3)), np.zeros((1, 4, 3)), -1.0)
+    for tolerance, problem in ((-0.1, "negative"), (float("nan"), "not finite"), (1.0, "not below 1")):
+        with pytest.raises(InputError, match=f"distance_tolerance.*{problem}"):
+            vertex_face_ccd(np.zeros((1, 4, 3)), np.zeros((1, 4, 3)), 0.1, distance_tolerance=tolerance)
 
 
 def test_deterministic(device: str) -> None:
