@@ -55,15 +55,20 @@ def test_unknown_kind_and_skipped_examples_say_why(tmp_path: Path) -> None:
 def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
     result = corpus_bench.bench_frame(_twisted_frame(2000), "cpu", repeats=1, with_newton=False, with_ipctk=False)
     methods = [r["method"] for r in result["rows"]]
-    assert methods == ["pscc", "pscc-no-rest", "spatial-hash"]
+    assert methods == ["pscc", "pscc-no-rest", "spatial-hash", "spatial-hash-dop"]
     rows = {r["method"]: r for r in result["rows"]}
     assert rows["spatial-hash"]["triangle_pairs"] > 0
+    # The 26-DOP face test only drops box pairs, and finds the same colliding pairs.
+    assert 0 < rows["spatial-hash-dop"]["triangle_pairs"] < rows["spatial-hash"]["triangle_pairs"]
+    for key in ("vertex_face_pairs", "edge_edge_pairs"):
+        assert rows["spatial-hash-dop"][key] == rows["spatial-hash"][key]
     for name in ("pscc", "pscc-no-rest"):
         # DCD: pscc returns a subset of the exact pairs (pairs inside one front node are culled).
         assert result["ratios"][name]["subset_of_spatial_hash"]
         assert 0.0 < result["ratios"][name]["found_vs_spatial_hash"] <= 1.0
         assert 0 < rows[name]["triangle_pairs"] <= rows["spatial-hash"]["triangle_pairs"]
         assert rows[name]["vertex_face_pairs"] + rows[name]["edge_edge_pairs"] > 0
+        assert result["ratios"][name]["pairs_vs_spatial_hash_dop"] > 0
         assert result["ratios"][name]["time_vs_spatial-hash"] > 0
         assert result["ratios"][name]["host_vs_spatial-hash"] > 0
     for row in rows.values():
@@ -81,7 +86,8 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     (entry,) = results["frames"]
     assert entry["faces"] == 12736 and not entry["rest"] and entry["missing"] == []
     rows = {r["method"]: r for r in entry["rows"]}
-    assert list(rows) == ["pscc-no-rest", "spatial-hash", "newton", "ipctk-lbvh-1", "ipctk-lbvh-2"]
+    assert list(rows) == ["pscc-no-rest", "spatial-hash", "spatial-hash-dop", "newton", "ipctk-lbvh-1",
+                          "ipctk-lbvh-2"]
     pscc, spatial = rows["pscc-no-rest"], rows["spatial-hash"]
     assert entry["ratios"]["pscc-no-rest"]["subset_of_spatial_hash"]
     assert 0 < pscc["triangle_pairs"] <= spatial["triangle_pairs"]

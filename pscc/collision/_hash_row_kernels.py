@@ -29,6 +29,7 @@ from pscc.collision._spatial_hash_kernels import (
     _SAME_NODE,
     _SLAB_TESTS,
     _TEST_CHUNK,
+    DiagonalArgs,
     GridState,
     SlabArgs,
     TableArgs,
@@ -37,6 +38,7 @@ from pscc.collision._spatial_hash_kernels import (
     linear_cell_id,
 )
 from pscc.geometry.aabb import boxes_overlap
+from pscc.geometry.dop import diagonal_slabs_overlap
 
 
 @wp.func
@@ -397,6 +399,7 @@ def _test_bounding_volumes(
     # in:
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
+    diagonals: DiagonalArgs,
     faces: wp.array(dtype=wp.vec3i),
     skip_adjacent: int,
     grid: wp.array(dtype=GridState),
@@ -413,7 +416,9 @@ def _test_bounding_volumes(
     work rows. Emitted pairs are appended below ``capacity``; the counter keeps counting past it.
 
     Row r = (g, b_start, b_end) holds the tests of every entry of group g against the entries
-    [b_start, b_end) (later groups of the same cell); every row has at least one test."""
+    [b_start, b_end) (later groups of the same cell); every row has at least one test. With
+    ``diagonals.enabled`` a test is of the faces' 26-DOPs: the boxes, then (only for boxes that overlap
+    in the token cell) the ten diagonal slabs."""
     total = info[_LIVE_TESTS]
     chunk = info[_TEST_CHUNK]
     k = wp.int64(wp.tid()) * chunk
@@ -429,6 +434,9 @@ def _test_bounding_volumes(
     row_span = tables.row_span
     row_work = tables.row_work
     row_scan = tables.row_scan
+    use_diagonals = diagonals.enabled
+    diagonal_lower = diagonals.lower
+    diagonal_upper = diagonals.upper
     r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
     q = k - (row_scan[r] - row_work[r])
     # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row r at
@@ -462,6 +470,9 @@ def _test_bounding_volumes(
                 for v in range(3):
                     if ta[u] == tb[v]:
                         emit = False
+        if emit and use_diagonals != 0:
+            emit = diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa],
+                                          diagonal_lower[fb], diagonal_upper[fb])
         if emit:
             slot = wp.atomic_add(counts, 0, wp.int64(1))
             if slot < capacity:

@@ -32,6 +32,7 @@ from __future__ import annotations
 import warp as wp
 
 from pscc import tolerances
+from pscc.geometry.dop import vec10
 
 wp.set_module_options({"enable_backward": False})
 
@@ -104,6 +105,16 @@ class GridState:
     cell_size: float
     dims: wp.vec3i
     margin: float
+
+
+@wp.struct
+class DiagonalArgs:
+    """The faces' diagonal slabs (:mod:`pscc.geometry.dop`) for the face test (``enabled`` = 0: boxes
+    only, the arrays are not read)."""
+
+    lower: wp.array(dtype=vec10)
+    upper: wp.array(dtype=vec10)
+    enabled: int
 
 
 @wp.struct

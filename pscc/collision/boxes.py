@@ -8,6 +8,8 @@ buffer                  shape, dtype           meaning
 vertex_lower/upper      (vertex_count,) vec3   box of the vertex's positions at t0 and t1
 edge_lower/upper        (edge_count,) vec3     box of the edge's 4 positions
 face_lower/upper        (face_count,) vec3     box of the face's 6 positions
+face_diagonal_lower/    (face_count,) vec10    the face's slabs along the ten diagonal axes of
+upper                   (0 when off)           :mod:`pscc.geometry.dop` (``face_diagonals=True``)
 ======================  =====================  ===============================================
 
 Every box is grown by half the proximity distance (so two primitives closer than the distance have
@@ -21,6 +23,7 @@ import warp as wp
 
 from pscc import tolerances
 from pscc.geometry.aabb import grow_box_lower, grow_box_upper
+from pscc.geometry.dop import face_diagonal_slabs, vec10
 
 wp.set_module_options({"enable_backward": False})
 
@@ -87,11 +90,16 @@ def _compute_face_boxes(
     swept: int,
     half_distance: float,
     relative_pad: float,
+    diagonals: int,
+    slab_pad: float,
     # out:
     lower_out: wp.array(dtype=wp.vec3),
     upper_out: wp.array(dtype=wp.vec3),
+    diagonal_lower_out: wp.array(dtype=vec10),
+    diagonal_upper_out: wp.array(dtype=vec10),
 ):
-    """One thread per face (``swept`` = 0: positions_t1 is not read)."""
+    """One thread per face (``swept`` = 0: positions_t1 is not read; ``diagonals`` = 0: the diagonal
+    slabs, grown with ``slab_pad``, are not written)."""
     i = wp.tid()
     f = faces[i]
     a = positions_t0[f[0]]
@@ -99,14 +107,21 @@ def _compute_face_boxes(
     c = positions_t0[f[2]]
     lo = wp.min(wp.min(a, b), c)
     hi = wp.max(wp.max(a, b), c)
+    a1 = a
+    b1 = b
+    c1 = c
     if swept != 0:
-        a = positions_t1[f[0]]
-        b = positions_t1[f[1]]
-        c = positions_t1[f[2]]
-        lo = wp.min(lo, wp.min(wp.min(a, b), c))
-        hi = wp.max(hi, wp.max(wp.max(a, b), c))
+        a1 = positions_t1[f[0]]
+        b1 = positions_t1[f[1]]
+        c1 = positions_t1[f[2]]
+        lo = wp.min(lo, wp.min(wp.min(a1, b1), c1))
+        hi = wp.max(hi, wp.max(wp.max(a1, b1), c1))
     lower_out[i] = grow_box_lower(lo, hi, half_distance, relative_pad)
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
+    if diagonals != 0:
+        slab_lo, slab_hi = face_diagonal_slabs(a, b, c, a1, b1, c1, swept, half_distance, slab_pad)
+        diagonal_lower_out[i] = slab_lo
+        diagonal_upper_out[i] = slab_hi
 
 
 @wp.struct
@@ -129,12 +144,19 @@ class PrimitiveBoxes:
         edges: (edge_count,) ``wp.vec2i`` device array.
         vertex_count: number of vertices.
         device: Warp device.
+        face_diagonals: also keep each face's diagonal slabs (:mod:`pscc.geometry.dop`), which make
+            its box a 26-DOP for the spatial hash's face test.
     """
 
-    def __init__(self, faces: wp.array, edges: wp.array, vertex_count: int, device: wp.Device) -> None:
+    def __init__(self, faces: wp.array, edges: wp.array, vertex_count: int, device: wp.Device,
+                 face_diagonals: bool = False) -> None:
         self.device = device
         self.faces = faces
         self.edges = edges
+        self._face_diagonals = bool(face_diagonals)
+        diagonal_count = faces.shape[0] if face_diagonals else 0
+        self.face_diagonal_lower = wp.empty(diagonal_count, dtype=vec10, device=device)
+        self.face_diagonal_upper = wp.empty(diagonal_count, dtype=vec10, device=device)
         self.vertex_lower = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self.vertex_upper = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self.edge_lower = wp.empty(edges.shape[0], dtype=wp.vec3, device=device)
@@ -155,9 +177,9 @@ class PrimitiveBoxes:
 
     @property
     def device_bytes(self) -> int:
-        """Bytes held on the device by the six box arrays."""
+        """Bytes held on the device by the box arrays (and the diagonal slabs)."""
         arrays = (self.vertex_lower, self.vertex_upper, self.edge_lower, self.edge_upper,
-                  self.face_lower, self.face_upper)
+                  self.face_lower, self.face_upper, self.face_diagonal_lower, self.face_diagonal_upper)
         return sum(a.capacity for a in arrays)
 
     def compute(self, positions_t0: wp.array, positions_t1: wp.array, distance: float) -> None:
@@ -176,5 +198,12 @@ class PrimitiveBoxes:
                   inputs=[self.edges, positions_t0, positions_t1, swept, half, pad],
                   outputs=[self.edge_lower, self.edge_upper], device=self.device)
         wp.launch(_compute_face_boxes, dim=self.face_lower.shape[0],
-                  inputs=[self.faces, positions_t0, positions_t1, swept, half, pad],
-                  outputs=[self.face_lower, self.face_upper], device=self.device)
+                  inputs=[self.faces, positions_t0, positions_t1, swept, half, pad,
+                          int(self.has_face_diagonals), tolerances.GROUP_SLAB_RELATIVE_PAD],
+                  outputs=[self.face_lower, self.face_upper, self.face_diagonal_lower, self.face_diagonal_upper],
+                  device=self.device)
+
+    @property
+    def has_face_diagonals(self) -> bool:
+        """Whether :meth:`compute` also fills the faces' diagonal slabs."""
+        return self._face_diagonals

@@ -99,6 +99,10 @@ class CollisionDetector:
         cell_size_factor: k of the grid-size heuristic, cell = k x mean box axis length.
         stitches: optional (s, 4) rows ``(i, j, k, r)`` (vertex i sewn to (1 - r) x_j + r x_k): the
             features a stitch joins are never reported (:mod:`pscc.collision.seams`).
+        face_diagonals: test face pairs in the spatial hash with 26-DOPs (the box and ten diagonal
+            slabs, :mod:`pscc.geometry.dop`) instead of boxes alone; ``None`` (default): on for
+            ``pscc``, off for ``spatial-hash`` (the plain hashing baseline). The pairs found do not
+            change, only the triangle pairs handed on. Ignored by ``brute-force``.
 
     Coordinate range: the kernels compute in float32, so every call that takes positions refuses
     arrays whose largest |coordinate| exceeds :data:`pscc.tolerances.MAX_COORDINATE` (1e9 length
@@ -126,6 +130,7 @@ class CollisionDetector:
         shrink_interval: int = 5,
         cell_size_factor: float = DEFAULT_CELL_SIZE_FACTOR,
         stitches: Any = None,
+        face_diagonals: bool | None = None,
     ) -> None:
         if method not in METHODS:
             raise InputError("argument", "method", f"unknown method {method!r}",
@@ -159,6 +164,10 @@ class CollisionDetector:
                              "object ids", "pass e.g. {1, 3}, or () for none") from exc
         self._shrink_interval = int(shrink_interval)
         self._cell_size_factor = float(cell_size_factor)
+        if face_diagonals is not None and not isinstance(face_diagonals, bool | np.bool_):
+            raise InputError("argument", "face_diagonals", f"{face_diagonals!r} is not a bool or None",
+                             "pass True, False or None (on for pscc only)")
+        self._face_diagonals = (method == "pscc") if face_diagonals is None else bool(face_diagonals)
         self._lent_scratch: wp.array | None = None
         self._lend_pair_buffers = False
         self._vertex_count: int | None = None
@@ -199,7 +208,8 @@ class CollisionDetector:
         self._previous_t1 = wp.empty(vertex_count, dtype=wp.vec3, device=device)
         self.seams = SeamAdjacency(self._stitches, vertex_count, device)
         """The stitch partners of each vertex (pairs a stitch joins are left out)."""
-        self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device)
+        self.boxes = PrimitiveBoxes(self._faces, self._edges, vertex_count, device,
+                                    face_diagonals=self._face_diagonals and self.method != "brute-force")
         self._feature_boxes = self.boxes.as_struct()
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
@@ -417,7 +427,9 @@ class CollisionDetector:
                 node_id_bound=self.bvh.node_count if node_id is not None else None,
                 face_order=self.bvh.arrays.face_order if node_id is not None else None,
                 # Front nodes are BVH nodes: each covers a contiguous range of the BVH's leaf order.
-                order_is_node_contiguous=node_id is not None)
+                order_is_node_contiguous=node_id is not None,
+                face_diagonal_lower=self.boxes.face_diagonal_lower if self.boxes.has_face_diagonals else None,
+                face_diagonal_upper=self.boxes.face_diagonal_upper if self.boxes.has_face_diagonals else None)
             lap("spatial_hash")
             self.feature_pairs.extract_device(self.spatial_hash.pairs, self.spatial_hash.counts, self.candidates,
                                               x0, x1, h, self._object_ids, self._feature_boxes)

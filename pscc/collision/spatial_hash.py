@@ -80,6 +80,7 @@ from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.errors import CapacityError, InputError
+from pscc.geometry.dop import vec10
 
 wp.set_module_options({"enable_backward": False})
 
@@ -306,6 +307,7 @@ class SpatialHash:
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
         self.summary = wp.zeros(kernels.SUMMARY_SIZE, dtype=wp.float64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
+        self._no_diagonals = wp.empty(0, dtype=vec10, device=dev)
         kind = "cuda" if self.device.is_cuda else "cpu"
         self.test_threads = max(1, min(DEFAULT_TEST_THREADS[kind], -(-tests_per_launch // self.tests_per_thread)))
         self.cell_bits = min(31, max(MIN_CELL_BITS, m.bit_length()))
@@ -482,6 +484,8 @@ class SpatialHash:
         half_distance: float = 0.0,
         node_id_bound: int | None = None,
         face_order: wp.array | None = None,
+        face_diagonal_lower: wp.array | None = None,
+        face_diagonal_upper: wp.array | None = None,
     ) -> tuple[wp.array, int]:
         """All face pairs (a < b) whose closed boxes overlap and whose node ids differ (with the
         group slab test: less the pairs of groups separated along a group axis, none of which is
@@ -511,6 +515,11 @@ class SpatialHash:
                 the cell bits alone the faces of a node stay together in each cell: the sort skips
                 the node bits. Checked on the device to be a permutation; a grouping it breaks is
                 caught by the same-node counter.
+            face_diagonal_lower: (face_count,) ``vec10`` lower ends of the faces' diagonal slabs
+                (:mod:`pscc.geometry.dop`, grown by the same half distance as the boxes), or ``None``.
+                With them (both or neither) a face pair is emitted only when its slabs overlap on the
+                ten diagonals as well: the faces' 26-DOPs overlap.
+            face_diagonal_upper: (face_count,) ``vec10`` upper ends, or ``None``.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
@@ -527,7 +536,9 @@ class SpatialHash:
         while True:
             self.find_pairs_device(face_lower, face_upper, node_id, positions_t0=positions_t0,
                                    positions_t1=positions_t1, half_distance=half_distance,
-                                   node_id_bound=node_id_bound, face_order=face_order, cell_size=cell_size)
+                                   node_id_bound=node_id_bound, face_order=face_order, cell_size=cell_size,
+                                   face_diagonal_lower=face_diagonal_lower,
+                                   face_diagonal_upper=face_diagonal_upper)
             if self.check_capacity():
                 return self.pairs[: self._pair_count], self._pair_count
 
@@ -544,6 +555,8 @@ class SpatialHash:
         face_order: wp.array | None = None,
         cell_size: float | None = None,
         order_is_node_contiguous: bool = False,
+        face_diagonal_lower: wp.array | None = None,
+        face_diagonal_upper: wp.array | None = None,
     ) -> None:
         """The pairs of :meth:`find_pairs`, left on the device: no host read, synchronization,
         allocation or upload, so the call can be recorded into a graph.
@@ -575,6 +588,8 @@ class SpatialHash:
                 compares every group with every later group of its cell, O(groups^2) per cell. A wrong
                 promise costs pairs, not misses: two groups of one node in a cell are then tested like
                 groups of two nodes (extra face pairs of one node), never dropped.
+            face_diagonal_lower: the faces' diagonal slabs, as for :meth:`find_pairs`, or ``None``.
+            face_diagonal_upper: their upper ends, or ``None``.
             Only types, shapes, devices and host scalars are validated here.
 
         Raises:
@@ -600,6 +615,7 @@ class SpatialHash:
         fixed_cell_size = 0.0 if cell_size is None else _check_positive(cell_size, "cell_size")
         if face_order is not None:
             self._check_array(face_order, "face_order", wp.int32)
+        diagonals = self._diagonal_args(face_diagonal_lower, face_diagonal_upper)
         slab, half = self._slab_args(not own_nodes, positions_t0, positions_t1, half_distance)
         node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
@@ -619,7 +635,7 @@ class SpatialHash:
             # cell bits sorted.
             self._insert_faces(face_lower, face_upper, node_id, node_bits, order, ordered, own_nodes or ordered)
             self._build_tables(node_bits, slab, int(ordered and not order_is_node_contiguous))
-            self._test_pairs(face_lower, face_upper, node_bits)
+            self._test_pairs(face_lower, face_upper, diagonals, node_bits)
             if self.sort_pairs:
                 self._sort_pairs()
         wp.launch(kernels._gather_summary, dim=1, inputs=[self.info, self.grid, self.counts],
@@ -923,7 +939,26 @@ class SpatialHash:
                   outputs=[self.row_span, self.row_work], device=dev)
         wp.utils.array_scan(self.row_work, self.row_scan, inclusive=True)
 
-    def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, node_bits: int) -> None:
+    def _diagonal_args(self, lower: wp.array | None, upper: wp.array | None) -> kernels.DiagonalArgs:
+        """The face test's diagonal slabs, checked (both arrays or neither)."""
+        args = kernels.DiagonalArgs()
+        if lower is None and upper is None:
+            args.lower = self._no_diagonals
+            args.upper = self._no_diagonals
+            args.enabled = 0
+            return args
+        if lower is None or upper is None:
+            raise InputError("argument", "face_diagonal_lower/face_diagonal_upper", "only one of the two was given",
+                             "pass both (PrimitiveBoxes(face_diagonals=True) fills them) or neither")
+        self._check_array(lower, "face_diagonal_lower", vec10)
+        self._check_array(upper, "face_diagonal_upper", vec10)
+        args.lower = lower
+        args.upper = upper
+        args.enabled = 1
+        return args
+
+    def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, diagonals: kernels.DiagonalArgs,
+                    node_bits: int) -> None:
         """The test pass: ``test_threads`` threads, each a contiguous chunk of the live BV tests."""
         tables = kernels.TableArgs()
         tables.entry_key = self.entry_key
@@ -934,7 +969,7 @@ class SpatialHash:
         tables.row_work = self.row_work
         tables.row_scan = self.row_scan
         wp.launch(row_kernels._test_bounding_volumes, dim=self.test_threads,
-                  inputs=[face_lower, face_upper, self.faces, int(self.skip_adjacent), self.grid, node_bits,
+                  inputs=[face_lower, face_upper, diagonals, self.faces, int(self.skip_adjacent), self.grid, node_bits,
                           tables, self.info, self.pair_capacity],
                   outputs=[self.counts, self.pairs], device=self.device)
 

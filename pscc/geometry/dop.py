@@ -1,0 +1,94 @@
+"""Diagonal slabs of a face: the ten extra axes of a 26-DOP, beside its axis-aligned box.
+
+A face's box bounds its projections on x, y and z. Thin tilted triangles (layers of cloth at an angle
+to the axes) have loose boxes: two faces of stacked layers overlap in x, y and z while a diagonal axis
+separates them. :func:`face_diagonal_slabs` gives a face's interval along the ten diagonals
+
+    x + y, x - y, x + z, x - z, y + z, y - z, x + y + z, x + y - z, x - y + z, -x + y + z
+
+(unnormalised: entries 0 or +-1), over its vertices at both ends of the step, grown for proximity. With
+the box, that is the face's 26-DOP (k-DOP with k = 26: 13 axes, two planes each; Klosowski et al.,
+"Efficient collision detection using bounding volume hierarchies of k-DOPs", 1998).
+:func:`diagonal_slabs_overlap` is the extra test a pair of overlapping boxes then passes.
+
+*Why no pair that can touch is lost.* Two faces closer than d = 2 h have points p, q with |p - q| < d,
+so along an axis a, |a . p - a . q| < d |a|; every point of a face (over the step, of the moving face)
+is a convex combination of its vertex positions, so its projection lies in the interval of theirs.
+Growing each interval by h |a| makes the two overlap.
+
+*Rounding.* With M_f >= |p|_1 for every vertex p of the face, the float32 sum of two or three
+coordinates errs by at most 2 u M_f; the grown ends are ``min - g`` and ``max + g``,
+``g = h |a| (1 + rho) + rho (M_f + h |a|)`` with rho = :data:`pscc.tolerances.GROUP_SLAB_RELATIVE_PAD`
+(16 u), |a| rounded up (sqrt 2, sqrt 3), and the rounding of g and of the final addition (at most
+u (M_f + g) each) stays inside the 16 u. So the stored interval contains the exact grown one, and a
+culled pair is farther apart than d over the whole step.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+DIAGONAL_AXES = 10
+"""Number of diagonal axes: six edge diagonals (norm sqrt 2) and four corner diagonals (norm sqrt 3)."""
+
+vec10 = wp.types.vector(length=DIAGONAL_AXES, dtype=wp.float32)
+"""One float32 per diagonal axis (a slab end)."""
+
+_SQRT2_UP = 1.4142137
+"""sqrt 2 rounded up in float32."""
+
+_SQRT3_UP = 1.7320509
+"""sqrt 3 rounded up in float32."""
+
+
+@wp.func
+def diagonal_projections(p: wp.vec3) -> vec10:
+    """p projected on the ten (unnormalised) diagonal axes, in the module docstring's order."""
+    x = p[0]
+    y = p[1]
+    z = p[2]
+    return vec10(x + y, x - y, x + z, x - z, y + z, y - z, x + y + z, x + y - z, x - y + z, y + z - x)
+
+
+@wp.func
+def _l1(p: wp.vec3) -> float:
+    """|p|_1."""
+    return wp.abs(p[0]) + wp.abs(p[1]) + wp.abs(p[2])
+
+
+@wp.func
+def face_diagonal_slabs(a: wp.vec3, b: wp.vec3, c: wp.vec3, a1: wp.vec3, b1: wp.vec3, c1: wp.vec3,
+                        swept: int, half_distance: float, relative_pad: float):
+    """(lower, upper) ends of the face's diagonal slabs over its vertices a, b, c at t0 and
+    (``swept`` != 0) a1, b1, c1 at t1, grown as the module docstring says."""
+    sa = diagonal_projections(a)
+    sb = diagonal_projections(b)
+    sc = diagonal_projections(c)
+    lo = wp.min(wp.min(sa, sb), sc)
+    hi = wp.max(wp.max(sa, sb), sc)
+    l1_bound = wp.max(wp.max(_l1(a), _l1(b)), _l1(c))
+    if swept != 0:
+        sa = diagonal_projections(a1)
+        sb = diagonal_projections(b1)
+        sc = diagonal_projections(c1)
+        lo = wp.min(lo, wp.min(wp.min(sa, sb), sc))
+        hi = wp.max(hi, wp.max(wp.max(sa, sb), sc))
+        l1_bound = wp.max(l1_bound, wp.max(wp.max(_l1(a1), _l1(b1)), _l1(c1)))
+    # Grown by h |a| (1 + rho) + rho (M_f + h |a|) on the edge (|a| = sqrt 2) and corner (sqrt 3) axes.
+    reach2 = half_distance * float(_SQRT2_UP)
+    reach3 = half_distance * float(_SQRT3_UP)
+    g2 = reach2 * (1.0 + relative_pad) + relative_pad * (l1_bound + reach2)
+    g3 = reach3 * (1.0 + relative_pad) + relative_pad * (l1_bound + reach3)
+    grow = vec10(g2, g2, g2, g2, g2, g2, g3, g3, g3, g3)
+    return lo - grow, hi + grow
+
+
+@wp.func
+def diagonal_slabs_overlap(lower_a: vec10, upper_a: vec10, lower_b: vec10, upper_b: vec10) -> bool:
+    """True when the two faces' slabs overlap on every diagonal axis (closed intervals)."""
+    for k in range(DIAGONAL_AXES):
+        if lower_a[k] > upper_b[k] or lower_b[k] > upper_a[k]:
+            return False
+    return True
