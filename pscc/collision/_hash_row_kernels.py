@@ -9,8 +9,10 @@ kernel                                   one thread per
                                          (first group of a cell) the cell's ``group_skip``
 ``_plan_rows``                           group slot: slab tests against later groups of its cell, its
                                          rows (runs of later groups that pass) and their BV tests
-``_gather_row_info``                     (single thread) row count, the tests each test thread runs
+``_gather_row_info``                     (single thread) row count, the tests each test thread runs,
+                                         whether the test pass reads cell codes
 ``_write_rows``                          group slot: its rows and the BV tests of each
+``_write_entry_codes``                   entry slot: its cell code (when the test pass reads them)
 ``_test_bounding_volumes``               test thread: a contiguous chunk of the BV tests
 =======================================  =============================================================
 """
@@ -20,7 +22,9 @@ from __future__ import annotations
 import warp as wp
 
 from pscc.collision._spatial_hash_kernels import (
+    _CELL_CODES,
     _FACE_TESTS,
+    _LIVE_ENTRIES,
     _LIVE_GROUPS,
     _LIVE_ROWS,
     _LIVE_TESTS,
@@ -297,11 +301,14 @@ def _gather_row_info(
     row_capacity: wp.int64,
     test_threads: wp.int64,
     min_chunk: wp.int64,
+    code_min_tests: wp.int64,
     # out:
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: the row count; when the rows fit, the BV tests of the test pass and the
-    chunk of them each of the ``test_threads`` threads runs (at least ``min_chunk``)."""
+    """A single thread: the row count; when the rows fit, the BV tests of the test pass, the
+    chunk of them each of the ``test_threads`` threads runs (at least ``min_chunk``), and whether the
+    test pass reads cell codes: when it runs at least ``code_min_tests`` BV tests per live entry (writing
+    a code costs about as much as that many box loads save)."""
     groups = int(info[_LIVE_GROUPS])
     if groups == 0:
         return
@@ -313,6 +320,8 @@ def _gather_row_info(
     tests = info[_FACE_TESTS]
     info[_LIVE_TESTS] = tests
     info[_TEST_CHUNK] = wp.max(min_chunk, (tests + test_threads - wp.int64(1)) / test_threads)
+    if tests >= code_min_tests * info[_LIVE_ENTRIES]:
+        info[_CELL_CODES] = wp.int64(1)
 
 
 @wp.kernel
@@ -381,6 +390,91 @@ def _write_rows(
 
 
 @wp.func
+def cell_fraction_code(t: float, cell: int) -> wp.uint32:
+    """The sixteenth of cell ``cell`` (one axis) that holds the grid coordinate ``t`` ((p - origin) times
+    1 / cell_size), clamped to [0, 15]. Non-decreasing in t for a fixed cell: a float32 subtraction of a
+    constant, the exact scaling by 16, floor and clamp are all monotone, so two entries of one cell
+    whose float32 intervals overlap get codes that overlap."""
+    q = wp.floor((t - float(cell)) * 16.0)
+    return wp.uint32(int(wp.clamp(q, 0.0, 15.0)))
+
+
+@wp.func
+def entry_cell_code(
+    key: wp.int64, node_bits: int, lower: wp.vec3, upper: wp.vec3, state: GridState
+) -> wp.uint32:
+    """The box [lower, upper] inside the cell of entry key ``key``: each end of each axis as a sixteenth
+    of the cell (``cell_fraction_code``), packed as 5-bit fields: upper x, y, z in bits 0-14, lower x,
+    y, z in bits 15-29 (bit 4 of every field clear: the guard of the test pass's packed comparison)."""
+    cell = int(key_cell(key, node_bits))  # < 2^31 (MAX_GRID_CELLS)
+    nz = state.dims[2]
+    ny = state.dims[1]
+    column = cell / nz
+    cz = cell - column * nz
+    cx = column / ny
+    cy = column - cx * ny
+    scale = 1.0 / state.cell_size
+    lo = (lower - state.origin) * scale
+    hi = (upper - state.origin) * scale
+    code = cell_fraction_code(hi[0], cx)
+    code = code | (cell_fraction_code(hi[1], cy) << wp.uint32(5))
+    code = code | (cell_fraction_code(hi[2], cz) << wp.uint32(10))
+    code = code | (cell_fraction_code(lo[0], cx) << wp.uint32(15))
+    code = code | (cell_fraction_code(lo[1], cy) << wp.uint32(20))
+    return code | (cell_fraction_code(lo[2], cz) << wp.uint32(25))
+
+
+CODE_UPPER_BITS = wp.constant(wp.uint32(0x7FFF))
+CODE_LOWER_BITS = wp.constant(wp.uint32(0x3FFF8000))
+CODE_GUARDS = wp.constant(wp.uint32(0x21084210))  # bit 4 of each of the six 5-bit fields
+
+
+@wp.func
+def code_minuend(code_a: wp.uint32) -> wp.uint32:
+    """Entry a's part of the packed comparison: its upper ends moved to bits 15-29, the guards set."""
+    return ((code_a & CODE_UPPER_BITS) << wp.uint32(15)) | CODE_GUARDS
+
+
+@wp.func
+def code_subtrahend(code_a: wp.uint32) -> wp.uint32:
+    """Entry a's lower ends, moved to bits 0-14."""
+    return code_a >> wp.uint32(15)
+
+
+@wp.func
+def cell_codes_overlap(minuend_a: wp.uint32, subtrahend_a: wp.uint32, code_b: wp.uint32) -> bool:
+    """Whether the cell codes of entries a and b overlap on every axis: upper_b >= lower_a in fields
+    0-2 and upper_a >= lower_b in fields 3-5, in one subtraction (each field is at most 15 and its guard
+    bit 16, so no field borrows from the next; the guard stays set exactly where the minuend field is
+    the larger). False only when the boxes' float32 test fails as well (``cell_fraction_code`` is
+    monotone)."""
+    difference = ((code_b & CODE_UPPER_BITS) | minuend_a) - (subtrahend_a | (code_b & CODE_LOWER_BITS))
+    return (difference & CODE_GUARDS) == CODE_GUARDS
+
+
+@wp.kernel
+def _write_entry_codes(
+    # in:
+    entry_key: wp.array(dtype=wp.int64),
+    entry_face: wp.array(dtype=wp.int32),
+    face_lower: wp.array(dtype=wp.vec3),
+    face_upper: wp.array(dtype=wp.vec3),
+    grid: wp.array(dtype=GridState),
+    node_bits: int,
+    info: wp.array(dtype=wp.int64),
+    # out:
+    entry_code: wp.array(dtype=wp.uint32),
+):
+    """One thread per entry slot: a live entry's ``entry_cell_code``, when ``_gather_row_info`` chose
+    the codes for this call (else nothing)."""
+    i = wp.tid()
+    if info[_CELL_CODES] == wp.int64(0) or wp.int64(i) >= info[_LIVE_ENTRIES]:
+        return
+    f = entry_face[i]
+    entry_code[i] = entry_cell_code(entry_key[i], node_bits, face_lower[f], face_upper[f], grid[0])
+
+
+@wp.func
 def _find_row(row_scan: wp.array(dtype=wp.int64), row_count: int, k: wp.int64) -> int:
     """First row r with row_scan[r] > k (row_scan is the inclusive scan of the row work)."""
     lo = int(0)
@@ -418,7 +512,9 @@ def _test_bounding_volumes(
     Row r = (g, b_start, b_end) holds the tests of every entry of group g against the entries
     [b_start, b_end) (later groups of the same cell); every row has at least one test. With
     ``diagonals.enabled`` a test is of the faces' 26-DOPs: the boxes, then (only for boxes that overlap
-    in the token cell) the ten diagonal slabs."""
+    in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
+    the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
+    order); the codes never reject a pair whose boxes overlap."""
     total = info[_LIVE_TESTS]
     chunk = info[_TEST_CHUNK]
     k = wp.int64(wp.tid()) * chunk
@@ -434,6 +530,8 @@ def _test_bounding_volumes(
     row_span = tables.row_span
     row_work = tables.row_work
     row_scan = tables.row_scan
+    entry_code = tables.entry_code
+    use_codes = info[_CELL_CODES] != wp.int64(0)
     use_diagonals = diagonals.enabled
     diagonal_lower = diagonals.lower
     diagonal_upper = diagonals.upper
@@ -451,14 +549,26 @@ def _test_bounding_volumes(
     entry_b = b_start + int(q % rest)
     row_cell = key_cell(entry_key[group_starts[g]], node_bits)
     last_a = group_ends[g]
-    fa = entry_face[entry_a]
-    lower_a = face_lower[fa]
-    upper_a = face_upper[fa]
+    code_a = wp.uint32(0)
+    if use_codes:
+        code_a = entry_code[entry_a]
+    minuend_a = code_minuend(code_a)
+    subtrahend_a = code_subtrahend(code_a)
     while k < end_test:
-        fb = entry_face[entry_b]
         # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
-        lower_b = face_lower[fb]
-        emit = boxes_overlap(lower_a, upper_a, lower_b, face_upper[fb])
+        emit = True
+        if use_codes:
+            emit = cell_codes_overlap(minuend_a, subtrahend_a, entry_code[entry_b])
+        fa = int(0)
+        fb = int(0)
+        lower_a = wp.vec3()
+        lower_b = wp.vec3()
+        if emit:
+            fa = entry_face[entry_a]
+            fb = entry_face[entry_b]
+            lower_a = face_lower[fa]
+            lower_b = face_lower[fb]
+            emit = boxes_overlap(lower_a, face_upper[fa], lower_b, face_upper[fb])
         if emit:
             # Token position: only the cell holding the lower corner of the boxes' intersection emits.
             token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
@@ -494,6 +604,7 @@ def _test_bounding_volumes(
                 entry_b = b_start
                 last_a = group_ends[g]
                 row_cell = key_cell(entry_key[entry_a], node_bits)
-            fa = entry_face[entry_a]
-            lower_a = face_lower[fa]
-            upper_a = face_upper[fa]
+            if use_codes:
+                code_a = entry_code[entry_a]
+                minuend_a = code_minuend(code_a)
+                subtrahend_a = code_subtrahend(code_a)

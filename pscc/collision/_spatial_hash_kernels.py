@@ -65,7 +65,8 @@ INFO_LIVE_GROUPS: int = 13
 INFO_LIVE_ROWS: int = 14
 INFO_LIVE_TESTS: int = 15  # BV tests the test pass runs
 INFO_TEST_CHUNK: int = 16  # BV tests per test thread (a contiguous chunk each)
-INFO_SIZE: int = 17
+INFO_CELL_CODES: int = 17  # 1: the test pass reads the entries' cell codes (enough BV tests per entry)
+INFO_SIZE: int = 18
 """Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size and the pairs emitted."""
 SUMMARY_DIMS: int = INFO_SIZE
 SUMMARY_CELL_SIZE: int = INFO_SIZE + 3
@@ -93,6 +94,7 @@ _LIVE_GROUPS = wp.constant(INFO_LIVE_GROUPS)
 _LIVE_ROWS = wp.constant(INFO_LIVE_ROWS)
 _LIVE_TESTS = wp.constant(INFO_LIVE_TESTS)
 _TEST_CHUNK = wp.constant(INFO_TEST_CHUNK)
+_CELL_CODES = wp.constant(INFO_CELL_CODES)
 _INFO_SIZE = wp.constant(INFO_SIZE)
 
 
@@ -128,6 +130,7 @@ class TableArgs:
     row_span: wp.array(dtype=wp.vec3i)
     row_work: wp.array(dtype=wp.int64)
     row_scan: wp.array(dtype=wp.int64)
+    entry_code: wp.array(dtype=wp.uint32)
 
 
 @wp.struct
