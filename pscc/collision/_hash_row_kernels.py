@@ -83,7 +83,8 @@ def _compute_group_slabs(
     """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
     this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
     A zero axis (a degenerate middle face) marks a group that is never culled. Groups
-    whose cell holds too few other entries for any slab test (``slab.min_work``) are skipped. The first
+    whose cell holds too few other entries for any slab test (``slab.min_work``), and groups too small to
+    be the larger group of a slab test, are skipped. The first
     group of each cell also writes the cell's ``slab.group_skip``."""
     g = wp.tid()
     live = int(info[_LIVE_GROUPS])
@@ -115,7 +116,10 @@ def _compute_group_slabs(
     if cell > 0:
         cell_start = cell_end[cell - 1]
     others = (cell_end[cell] - cell_start) - (end - start)
-    if wp.int64(end - start) * wp.int64(others) < slab.min_work:
+    size = wp.int64(end - start)
+    # A slab test of groups g and h reads the axis and slab of the larger one (g on a tie), and runs
+    # only when n_g n_h >= min_work: a group with n_g^2 < min_work is never the one read.
+    if size * wp.int64(others) < slab.min_work or size * size < slab.min_work:
         group_axis[g] = wp.vec3(0.0, 0.0, 0.0)
         return
     # The normal of the group's middle face (in fill order): one cross product

@@ -469,7 +469,7 @@ class SpatialHash:
         # group_rank, cell_rank and group_start are views into the entry buffers' sort scratch.
         names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
-                 "faces", "entry_key", "entry_face", "cell_end",
+                 "faces", "entry_key", "entry_face", "entry_code", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "row_span",
                  "row_work",
                  "row_scan", "pairs", "pair_keys")

@@ -302,3 +302,23 @@ def test_tests_per_thread_does_not_change_pairs(device: str) -> None:
     many, hash_many = _run(device, lower, upper, patches, tests_per_thread=7)
     np.testing.assert_array_equal(one, many)
     assert hash_one.stats.bv_tests == hash_many.stats.bv_tests
+
+
+def test_device_bytes_counts_every_buffer_it_owns() -> None:
+    """Every wp.array the hash holds is in ``device_bytes``, except views into another buffer (the
+    ranks and group starts in the sort's scratch halves)."""
+    hash_ = SpatialHash(64, "cpu", faces=wp.zeros(64, dtype=wp.vec3i, device="cpu"), group_slab_test=True)
+    lower = np.random.default_rng(0).uniform(0.0, 2.0, size=(64, 3)).astype(np.float32)
+    hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device="cpu"),
+                     wp.array(lower + np.float32(0.3), dtype=wp.vec3, device="cpu"))
+    arrays = {name: value for name, value in vars(hash_).items() if isinstance(value, wp.array) and value.capacity}
+
+    def inside_another(name: str) -> bool:
+        a = arrays[name]
+        return any(other != name and b.ptr <= a.ptr < b.ptr + b.capacity and (b.ptr, -b.capacity) < (a.ptr, -a.capacity)
+                   for other, b in arrays.items())
+
+    owned = {name for name in arrays if not inside_another(name)}
+    counted = set(hash_.device_bytes)
+    assert owned - counted == set()
+    assert {"group_rank", "cell_rank", "group_start", "row_count", "row_end"}.isdisjoint(owned)
