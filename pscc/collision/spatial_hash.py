@@ -88,8 +88,9 @@ from pscc.geometry.dop import vec10
 
 wp.set_module_options({"enable_backward": False})
 
-DEFAULT_CELL_SIZE_FACTOR: float = 1.5
-"""k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value)."""
+DEFAULT_CELL_SIZE_FACTOR: float = 2.5
+"""k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value; ``docs/spatial-hash.md``
+section 6 has the measurements behind 2.5)."""
 
 TESTS_PER_LAUNCH: int = 2**24
 """Default bound on the BV tests of one test launch: the launch has at most
