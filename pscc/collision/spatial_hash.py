@@ -114,9 +114,10 @@ MAX_ENTRIES: int = 2**30 - 1
 MAX_PAIRS: int = 2**30 - 1
 """Most emitted face pairs: the pair buffer is int32-indexed and the radix sort needs 2 P slots."""
 
-DEFAULT_SLAB_MIN_WORK: int = 8
+DEFAULT_SLAB_MIN_WORK: int = 16
 """Two groups are slab-tested only when they would need at least this many face tests (n_g n_h):
-a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face."""
+a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face
+(16 since the cell codes made a face test cheaper; ``docs/spatial-hash.md`` section 3a)."""
 
 DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
 """Grid guard: when the entries exceed this many per face, the cell size is doubled and the
