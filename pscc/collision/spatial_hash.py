@@ -69,13 +69,16 @@ later kernels read the device counts. A buffer that is too small is not written 
 stage stops, the true count is kept, and :meth:`SpatialHash.check_capacity` (the sync point: one
 read of ``summary``) raises deferred input errors, grows what overflowed and says whether to run
 again. :meth:`SpatialHash.find_pairs` is both, repeated until the buffers fit.
+
+The defaults, buffer limits and :class:`SpatialHashStats` live in
+:mod:`pscc.collision.spatial_hash_settings` (re-exported here); the kernels in
+:mod:`pscc.collision._spatial_hash_kernels` and :mod:`pscc.collision._hash_row_kernels`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
@@ -83,110 +86,41 @@ import warp as wp
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
+from pscc.collision.spatial_hash_settings import (
+    CELL_CODE_MIN_TESTS,
+    DEFAULT_CELL_SIZE_FACTOR,
+    DEFAULT_MAX_MEAN_CELLS_PER_FACE,
+    DEFAULT_SLAB_MIN_WORK,
+    DEFAULT_TEST_THREADS,
+    GROWTH,
+    MAX_ENTRIES,
+    MAX_GRID_CELLS,
+    MAX_PAIRS,
+    MIN_CELL_BITS,
+    SCENE_CHUNKS,
+    TESTS_PER_LAUNCH,
+    SpatialHashStats,
+    check_positive,
+)
 from pscc.errors import CapacityError, InputError
 from pscc.geometry.dop import vec10
 
+__all__ = [
+    "CELL_CODE_MIN_TESTS",
+    "DEFAULT_CELL_SIZE_FACTOR",
+    "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_SLAB_MIN_WORK",
+    "DEFAULT_TEST_THREADS",
+    "MAX_ENTRIES",
+    "MAX_GRID_CELLS",
+    "MAX_PAIRS",
+    "MIN_CELL_BITS",
+    "TESTS_PER_LAUNCH",
+    "SpatialHash",
+    "SpatialHashStats",
+]
+
 wp.set_module_options({"enable_backward": False})
-
-DEFAULT_CELL_SIZE_FACTOR: float = 2.5
-"""k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value; ``docs/spatial-hash.md``
-section 6 has the measurements behind 2.5)."""
-
-TESTS_PER_LAUNCH: int = 2**24
-"""Default bound on the BV tests of one test launch: the launch has at most
-ceil(tests_per_launch / tests_per_thread) threads (and at most ``DEFAULT_TEST_THREADS``)."""
-
-DEFAULT_TEST_THREADS: dict[str, int] = {"cuda": 2**20, "cpu": 2**10}
-"""Threads of the test launch per device kind; each runs a contiguous chunk of the device-known
-BV tests (at least ``tests_per_thread``), so the launch size does not depend on device data."""
-
-MAX_GRID_CELLS: int = kernels.MAX_GRID_CELLS
-"""Most cells of the grid: a CellId must fit in the high 31 bits of a non-negative int64 key."""
-
-MIN_CELL_BITS: int = 16
-"""Initial cell bits of the entry sort (2^16 cells; more when the face count needs them). The sort
-range must not depend on device data, so the grid guard also coarsens grids with more cells than
-2^cell_bits; :meth:`SpatialHash.check_capacity` then widens the bits and asks for a re-run."""
-
-MAX_ENTRIES: int = 2**30 - 1
-"""Most face-cell entries: entries are int32-indexed and the radix sort needs 2 E slots."""
-
-MAX_PAIRS: int = 2**30 - 1
-"""Most emitted face pairs: the pair buffer is int32-indexed and the radix sort needs 2 P slots."""
-
-DEFAULT_SLAB_MIN_WORK: int = 16
-"""Two groups are slab-tested only when they would need at least this many face tests (n_g n_h):
-a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face
-(16 since the cell codes made a face test cheaper; ``docs/spatial-hash.md`` section 3a)."""
-
-DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
-"""Grid guard: when the entries exceed this many per face, the cell size is doubled and the
-faces are counted again (pairs are unchanged, only culling gets coarser)."""
-
-_SCENE_CHUNKS: int = 1024
-"""Threads of the scene-bounds reduction (each folds a chunk of faces)."""
-
-CELL_CODE_MIN_TESTS: int = 4
-"""BV tests per entry from which a call's test pass first compares the entries' cell codes (4 bytes,
-read in entry order) and loads the boxes only of pairs whose codes overlap; below it, writing the codes
-costs more than they save (measured on the corpus frames: about 8 ns per code, 1.2 ns saved per test)."""
-
-_GROWTH: float = 1.25
-"""Grown buffers get this factor over the exact count, so small increases do not re-grow."""
-
-
-@dataclass
-class SpatialHashStats:
-    """Counters of the last call that :meth:`SpatialHash.check_capacity` read (every
-    :meth:`SpatialHash.find_pairs` call ends with one).
-
-    Attributes:
-        cell_size: cell edge used (float32 value; larger than requested after coarsening).
-        grid_dims: (N_x, N_y, N_z) cells per axis.
-        entries: face-cell insertions E.
-        groups: distinct {cell, node} keys (triangleHashTable rows).
-        cells: non-empty cells (workLoadHashTable rows).
-        bv_tests: bounding-volume tests run: ``face_tests + slab_tests``.
-        face_tests: face box tests run: sum over cells of sum_{i<j} n_i n_j over the group pairs
-            that are not culled by a slab test (all of them when the slab test is off).
-        slab_tests: group slab tests run (0 when the slab test is off).
-        rows: work rows (a group against a run of later groups of its cell).
-        triangle_pairs: face pairs emitted (unique, a < b).
-        mean_cells_per_face: E / face_count.
-        coarsenings: times the cell size was doubled by the grid guard.
-        reruns: times the call ran again because the pair buffer grew (re-runs for the other
-            buffers, which overflow before any pair is tested, are not counted).
-        same_node_tests: face pairs of one node that met in a cell in two groups (never tested; 0
-            unless a ``face_order`` splits a node; checked by the tests).
-        device_bytes: bytes held on the device, per buffer.
-    """
-
-    cell_size: float = 0.0
-    grid_dims: tuple[int, int, int] = (0, 0, 0)
-    entries: int = 0
-    groups: int = 0
-    cells: int = 0
-    bv_tests: int = 0
-    face_tests: int = 0
-    slab_tests: int = 0
-    rows: int = 0
-    triangle_pairs: int = 0
-    mean_cells_per_face: float = 0.0
-    coarsenings: int = 0
-    reruns: int = 0
-    same_node_tests: int = 0
-    device_bytes: dict[str, int] = field(default_factory=dict)
-
-
-def _check_positive(value: float, name: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise InputError("argument", name, f"{value!r} is not a number", "pass a finite float > 0") from exc
-    if not math.isfinite(number) or number <= 0.0:
-        raise InputError("argument", name, f"{value!r} is not a finite number > 0", "pass a finite float > 0")
-    return number
-
 
 class SpatialHash:
     """Spatial-hashing broad phase over face pairs with the paired {CellId, NodeId} key.
@@ -287,8 +221,8 @@ class SpatialHash:
         self.cell_code_min_tests = int(cell_code_min_tests)
         """BV tests per live entry from which a call compares cell codes first (:data:`CELL_CODE_MIN_TESTS`)."""
         self.face_count = int(face_count)
-        self.cell_size_factor = _check_positive(cell_size_factor, "cell_size_factor")
-        self.max_mean_cells_per_face = _check_positive(max_mean_cells_per_face, "max_mean_cells_per_face")
+        self.cell_size_factor = check_positive(cell_size_factor, "cell_size_factor")
+        self.max_mean_cells_per_face = check_positive(max_mean_cells_per_face, "max_mean_cells_per_face")
         if self.max_mean_cells_per_face < 1.0:
             raise InputError("argument", "max_mean_cells_per_face", f"{max_mean_cells_per_face!r} < 1",
                              "pass a value >= 1 (every face overlaps at least one cell)")
@@ -314,7 +248,7 @@ class SpatialHash:
             self.faces = wp.zeros(1, dtype=wp.vec3i, device=self.device)
 
         dev = self.device
-        chunks = max(1, min(_SCENE_CHUNKS, m))
+        chunks = max(1, min(SCENE_CHUNKS, m))
         self._chunk_size = max(1, -(-m // chunks))
         self._chunk_count = max(1, -(-m // self._chunk_size))
         self.chunk_lower = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
@@ -637,7 +571,7 @@ class SpatialHash:
                                           or not 1 <= node_id_bound <= 2**31):
             raise InputError("argument", "node_id_bound", f"{node_id_bound!r} is not an integer in [1, 2^31]",
                              "pass one more than the largest node id, or None")
-        fixed_cell_size = 0.0 if cell_size is None else _check_positive(cell_size, "cell_size")
+        fixed_cell_size = 0.0 if cell_size is None else check_positive(cell_size, "cell_size")
         if face_order is not None:
             self._check_array(face_order, "face_order", wp.int32)
         diagonals = self._diagonal_args(face_diagonal_lower, face_diagonal_upper)
@@ -758,17 +692,17 @@ class SpatialHash:
         for slot, name, limit, allocate in needs:
             need = int(info[slot])
             if need > getattr(self, name):
-                allocate(min(limit, int(need * _GROWTH) + 1))
+                allocate(min(limit, int(need * GROWTH) + 1))
                 fits = False
         if self._last_slab and int(info[kernels.INFO_GROUPS]) > self.slab_capacity:
-            self._allocate_slabs(min(MAX_ENTRIES, int(int(info[kernels.INFO_GROUPS]) * _GROWTH) + 1))
+            self._allocate_slabs(min(MAX_ENTRIES, int(int(info[kernels.INFO_GROUPS]) * GROWTH) + 1))
             fits = False
         found = int(info[kernels.SUMMARY_PAIRS])
         if found > MAX_PAIRS:
             raise CapacityError(f"spatial hash pair buffer: {found} pairs exceed {MAX_PAIRS}; "
                                 "use smaller boxes or split the scene")
         if found > self.pair_capacity:
-            self._allocate_pairs(min(MAX_PAIRS, int(found * _GROWTH)))
+            self._allocate_pairs(min(MAX_PAIRS, int(found * GROWTH)))
             self._pair_reruns += 1
             fits = False
         wanted = int(info[kernels.INFO_WANTED_CELLS])

@@ -1,0 +1,129 @@
+"""Settings, limits and per-call statistics of :class:`pscc.collision.spatial_hash.SpatialHash`: the
+defaults of its constructor, the capacity limits of its buffers and the counters that its sync point
+reads back (:class:`SpatialHashStats`). ``docs/spatial-hash.md`` has the measurements behind the
+defaults."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from pscc.collision import _spatial_hash_kernels as kernels
+from pscc.errors import InputError
+
+__all__ = [
+    "CELL_CODE_MIN_TESTS",
+    "DEFAULT_CELL_SIZE_FACTOR",
+    "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_SLAB_MIN_WORK",
+    "DEFAULT_TEST_THREADS",
+    "GROWTH",
+    "MAX_ENTRIES",
+    "MAX_GRID_CELLS",
+    "MAX_PAIRS",
+    "MIN_CELL_BITS",
+    "SCENE_CHUNKS",
+    "TESTS_PER_LAUNCH",
+    "SpatialHashStats",
+    "check_positive",
+]
+
+DEFAULT_CELL_SIZE_FACTOR: float = 2.5
+"""k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value; ``docs/spatial-hash.md``
+section 6 has the measurements behind 2.5)."""
+
+TESTS_PER_LAUNCH: int = 2**24
+"""Default bound on the BV tests of one test launch: the launch has at most
+ceil(tests_per_launch / tests_per_thread) threads (and at most ``DEFAULT_TEST_THREADS``)."""
+
+DEFAULT_TEST_THREADS: dict[str, int] = {"cuda": 2**20, "cpu": 2**10}
+"""Threads of the test launch per device kind; each runs a contiguous chunk of the device-known
+BV tests (at least ``tests_per_thread``), so the launch size does not depend on device data."""
+
+MAX_GRID_CELLS: int = kernels.MAX_GRID_CELLS
+"""Most cells of the grid: a CellId must fit in the high 31 bits of a non-negative int64 key."""
+
+MIN_CELL_BITS: int = 16
+"""Initial cell bits of the entry sort (2^16 cells; more when the face count needs them). The sort
+range must not depend on device data, so the grid guard also coarsens grids with more cells than
+2^cell_bits; :meth:`SpatialHash.check_capacity` then widens the bits and asks for a re-run."""
+
+MAX_ENTRIES: int = 2**30 - 1
+"""Most face-cell entries: entries are int32-indexed and the radix sort needs 2 E slots."""
+
+MAX_PAIRS: int = 2**30 - 1
+"""Most emitted face pairs: the pair buffer is int32-indexed and the radix sort needs 2 P slots."""
+
+DEFAULT_SLAB_MIN_WORK: int = 16
+"""Two groups are slab-tested only when they would need at least this many face tests (n_g n_h):
+a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face
+(16 since the cell codes made a face test cheaper; ``docs/spatial-hash.md`` section 3a)."""
+
+DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
+"""Grid guard: when the entries exceed this many per face, the cell size is doubled and the
+faces are counted again (pairs are unchanged, only culling gets coarser)."""
+
+SCENE_CHUNKS: int = 1024
+"""Threads of the scene-bounds reduction (each folds a chunk of faces)."""
+
+CELL_CODE_MIN_TESTS: int = 4
+"""BV tests per entry from which a call's test pass first compares the entries' cell codes (4 bytes,
+read in entry order) and loads the boxes only of pairs whose codes overlap; below it, writing the codes
+costs more than they save (measured on the corpus frames: about 8 ns per code, 1.2 ns saved per test)."""
+
+GROWTH: float = 1.25
+"""Grown buffers get this factor over the exact count, so small increases do not re-grow."""
+
+
+@dataclass
+class SpatialHashStats:
+    """Counters of the last call that :meth:`SpatialHash.check_capacity` read (every
+    :meth:`SpatialHash.find_pairs` call ends with one).
+
+    Attributes:
+        cell_size: cell edge used (float32 value; larger than requested after coarsening).
+        grid_dims: (N_x, N_y, N_z) cells per axis.
+        entries: face-cell insertions E.
+        groups: distinct {cell, node} keys (triangleHashTable rows).
+        cells: non-empty cells (workLoadHashTable rows).
+        bv_tests: bounding-volume tests run: ``face_tests + slab_tests``.
+        face_tests: face box tests run: sum over cells of sum_{i<j} n_i n_j over the group pairs
+            that are not culled by a slab test (all of them when the slab test is off).
+        slab_tests: group slab tests run (0 when the slab test is off).
+        rows: work rows (a group against a run of later groups of its cell).
+        triangle_pairs: face pairs emitted (unique, a < b).
+        mean_cells_per_face: E / face_count.
+        coarsenings: times the cell size was doubled by the grid guard.
+        reruns: times the call ran again because the pair buffer grew (re-runs for the other
+            buffers, which overflow before any pair is tested, are not counted).
+        same_node_tests: face pairs of one node that met in a cell in two groups (never tested; 0
+            unless a ``face_order`` splits a node; checked by the tests).
+        device_bytes: bytes held on the device, per buffer.
+    """
+
+    cell_size: float = 0.0
+    grid_dims: tuple[int, int, int] = (0, 0, 0)
+    entries: int = 0
+    groups: int = 0
+    cells: int = 0
+    bv_tests: int = 0
+    face_tests: int = 0
+    slab_tests: int = 0
+    rows: int = 0
+    triangle_pairs: int = 0
+    mean_cells_per_face: float = 0.0
+    coarsenings: int = 0
+    reruns: int = 0
+    same_node_tests: int = 0
+    device_bytes: dict[str, int] = field(default_factory=dict)
+
+
+def check_positive(value: float, name: str) -> float:
+    """``value`` as a float, or an InputError naming the argument ``name`` when it is not a finite number > 0."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError) as exc:
+        raise InputError("argument", name, f"{value!r} is not a number", "pass a finite float > 0") from exc
+    if not math.isfinite(number) or number <= 0.0:
+        raise InputError("argument", name, f"{value!r} is not a finite number > 0", "pass a finite float > 0")
+    return number
