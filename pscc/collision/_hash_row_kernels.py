@@ -41,6 +41,13 @@ from pscc.collision._spatial_hash_kernels import (
     key_cell,
     linear_cell_id,
 )
+from pscc.collision.shared_vertex import (
+    SHARED_CERTIFY,
+    SHARED_SKIP,
+    SharedVertexArgs,
+    certified_in,
+    shares_vertex,
+)
 from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.dop import diagonal_slabs_overlap
 
@@ -498,8 +505,7 @@ def _test_bounding_volumes(
     face_lower: wp.array(dtype=wp.vec3),
     face_upper: wp.array(dtype=wp.vec3),
     diagonals: DiagonalArgs,
-    faces: wp.array(dtype=wp.vec3i),
-    skip_adjacent: int,
+    shared: SharedVertexArgs,
     grid: wp.array(dtype=GridState),
     node_bits: int,
     tables: TableArgs,
@@ -518,7 +524,9 @@ def _test_bounding_volumes(
     ``diagonals.enabled`` a test is of the faces' 26-DOPs: the boxes, then (only for boxes that overlap
     in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
     the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
-    order); the codes never reject a pair whose boxes overlap."""
+    order); the codes never reject a pair whose boxes overlap. Last, a pair of faces that share a vertex
+    is dropped with ``shared.mode`` skip, or with certify when its two faces are certified
+    (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
     total = info[_LIVE_TESTS]
     chunk = info[_TEST_CHUNK]
     k = wp.int64(wp.tid()) * chunk
@@ -537,6 +545,12 @@ def _test_bounding_volumes(
     entry_code = tables.entry_code
     use_codes = info[_CELL_CODES] != wp.int64(0)
     use_diagonals = diagonals.enabled
+    shared_mode = shared.mode
+    faces = shared.faces
+    shared_x0 = shared.positions_t0
+    shared_x1 = shared.positions_t1
+    shared_swept = shared.swept
+    shared_margin = shared.margin
     diagonal_lower = diagonals.lower
     diagonal_upper = diagonals.upper
     r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
@@ -577,16 +591,16 @@ def _test_bounding_volumes(
             # Token position: only the cell holding the lower corner of the boxes' intersection emits.
             token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
             emit = linear_cell_id(token, state.dims) == row_cell
-        if emit and skip_adjacent != 0:
-            ta = faces[fa]
-            tb = faces[fb]
-            for u in range(3):
-                for v in range(3):
-                    if ta[u] == tb[v]:
-                        emit = False
+        if emit and shared_mode == SHARED_SKIP:
+            emit = not shares_vertex(faces[fa], faces[fb])
         if emit and use_diagonals != 0:
             emit = diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa],
                                           diagonal_lower[fb], diagonal_upper[fb])
+        if emit and shared_mode == SHARED_CERTIFY:
+            ta = faces[fa]
+            tb = faces[fb]
+            if shares_vertex(ta, tb):
+                emit = not certified_in(shared_x0, shared_x1, shared_swept, shared_margin, ta, tb)
         if emit:
             slot = wp.atomic_add(counts, 0, wp.int64(1))
             if slot < capacity:

@@ -429,7 +429,8 @@ class CollisionDetector:
                 # Front nodes are BVH nodes: each covers a contiguous range of the BVH's leaf order.
                 order_is_node_contiguous=node_id is not None,
                 face_diagonal_lower=self.boxes.face_diagonal_lower if self.boxes.has_face_diagonals else None,
-                face_diagonal_upper=self.boxes.face_diagonal_upper if self.boxes.has_face_diagonals else None)
+                face_diagonal_upper=self.boxes.face_diagonal_upper if self.boxes.has_face_diagonals else None,
+                certify_shared=node_id is not None)
             lap("spatial_hash")
             self.feature_pairs.extract_device(self.spatial_hash.pairs, self.spatial_hash.counts, self.candidates,
                                               x0, x1, h, self._object_ids, self._feature_boxes)

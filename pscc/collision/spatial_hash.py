@@ -83,8 +83,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import warp as wp
 
+from pscc import tolerances
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
+from pscc.collision import shared_vertex
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
@@ -139,7 +141,8 @@ class SpatialHash:
         face_count: faces m (the length of every per-face array).
         device: Warp device (``None``: the default device).
         cell_size_factor: k in cell size = k x mean over faces of the mean box axis length.
-        faces: (face_count,) ``wp.vec3i`` vertex ids, needed only for ``skip_adjacent``.
+        faces: (face_count,) ``wp.vec3i`` vertex ids, needed only for ``skip_adjacent``,
+            ``group_slab_test`` and calls with ``certify_shared``.
         skip_adjacent: drop pairs that share a vertex (default False: such pairs can still
             collide through their other features, so the narrow phase usually wants them).
         max_mean_cells_per_face: grid guard; more entries than this times face_count double
@@ -237,8 +240,9 @@ class SpatialHash:
         if faces is not None:
             self._check_array(faces, "faces", wp.vec3i)
             self.faces = faces  # the caller's (not counted in device_bytes)
-            if self.group_slab_test and m > 0:
-                # The slab test reads positions[faces]: one host read here lets every call check them.
+            if m > 0:
+                # The slab test and the certificate read positions[faces]: one host read here lets
+                # every call check them.
                 self._vertex_bound = int(faces.numpy().max()) + 1
         elif self.skip_adjacent or self.group_slab_test:
             option = "skip_adjacent" if self.skip_adjacent else "group_slab_test"
@@ -246,7 +250,6 @@ class SpatialHash:
                              f"pass faces=(face_count,) wp.vec3i or leave {option} False")
         else:
             self.faces = wp.zeros(1, dtype=wp.vec3i, device=self.device)
-
         dev = self.device
         chunks = max(1, min(SCENE_CHUNKS, m))
         self._chunk_size = max(1, -(-m // chunks))
@@ -516,6 +519,7 @@ class SpatialHash:
         order_is_node_contiguous: bool = False,
         face_diagonal_lower: wp.array | None = None,
         face_diagonal_upper: wp.array | None = None,
+        certify_shared: bool = False,
     ) -> None:
         """The pairs of :meth:`find_pairs`, left on the device: no host read, synchronization,
         allocation or upload, so the call can be recorded into a graph.
@@ -549,6 +553,11 @@ class SpatialHash:
                 groups of two nodes (extra face pairs of one node), never dropped.
             face_diagonal_lower: the faces' diagonal slabs, as for :meth:`find_pairs`, or ``None``.
             face_diagonal_upper: their upper ends, or ``None``.
+            certify_shared: drop a pair that shares a vertex or an edge when the normal-cone
+                certificate of just those two faces holds (:mod:`pscc.collision.shared_vertex`: they
+                meet only in what they share, at ``positions_t0`` or over the step to
+                ``positions_t1``). Needs ``faces`` at construction (without ``skip_adjacent``) and
+                the positions.
             Only types, shapes, devices and host scalars are validated here.
 
         Raises:
@@ -576,6 +585,7 @@ class SpatialHash:
             self._check_array(face_order, "face_order", wp.int32)
         diagonals = self._diagonal_args(face_diagonal_lower, face_diagonal_upper)
         slab, half = self._slab_args(not own_nodes, positions_t0, positions_t1, half_distance)
+        shared = self._shared_args(bool(certify_shared), positions_t0, positions_t1)
         node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
         self._last_call = (face_order is not None, node_limit)
@@ -594,7 +604,7 @@ class SpatialHash:
             # cell bits sorted.
             self._insert_faces(face_lower, face_upper, node_id, node_bits, order, ordered, own_nodes or ordered)
             self._build_tables(face_lower, face_upper, node_bits, slab, int(ordered and not order_is_node_contiguous))
-            self._test_pairs(face_lower, face_upper, diagonals, node_bits)
+            self._test_pairs(face_lower, face_upper, diagonals, shared, node_bits)
             if self.sort_pairs:
                 self._sort_pairs()
         wp.launch(kernels._gather_summary, dim=1, inputs=[self.info, self.grid, self.counts],
@@ -769,11 +779,45 @@ class SpatialHash:
         if not (self.group_slab_test and grouped):
             slab.positions_t0 = slab.positions_t1 = self.chunk_lower
             return slab, 0.0
+        self._check_positions(positions_t0, positions_t1, "the group slab test", "with node_id")
+        half = float(half_distance)
+        if not math.isfinite(half) or half < 0.0:
+            raise InputError("argument", "half_distance", f"{half_distance!r} is not a finite number >= 0",
+                             "pass the half distance the boxes were grown by")
+        slab.enabled = 1
+        slab.positions_t0 = positions_t0
+        slab.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
+        slab.swept = 0 if positions_t1 is None else 1
+        return slab, float(np.float32(half))
+
+    def _shared_args(self, certify: bool, positions_t0: wp.array | None,
+                     positions_t1: wp.array | None) -> shared_vertex.SharedVertexArgs:
+        """The face test's arguments for pairs that share a vertex (``skip_adjacent``, ``certify_shared``)."""
+        args = shared_vertex.SharedVertexArgs()
+        args.faces = self.faces
+        args.mode = shared_vertex.SHARED_SKIP if self.skip_adjacent else shared_vertex.SHARED_KEEP
+        args.swept = 0
+        args.positions_t0 = args.positions_t1 = self.chunk_lower
+        args.margin = tolerances.NORMAL_CONE_MARGIN
+        if certify:
+            if not self._faces_given or self.skip_adjacent:
+                raise InputError("argument", "certify_shared", "this hash has no faces or skips every pair "
+                                 "that shares a vertex", "construct it with faces= and without skip_adjacent")
+            self._check_positions(positions_t0, positions_t1, "certify_shared", "on every call")
+            args.mode = shared_vertex.SHARED_CERTIFY
+            args.positions_t0 = positions_t0
+            args.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
+            args.swept = 0 if positions_t1 is None else 1
+        return args
+
+    def _check_positions(self, positions_t0: wp.array | None, positions_t1: wp.array | None, user: str,
+                         when: str) -> None:
+        """Vertex positions that ``user`` reads: vec3 arrays on this device covering the faces' vertices."""
         for name, value in (("positions_t0", positions_t0), ("positions_t1", positions_t1)):
             if value is None:
                 if name == "positions_t0":
-                    raise InputError("argument", name, "the group slab test needs the vertex positions",
-                                     "pass positions_t0 (and positions_t1 for CCD) with node_id")
+                    raise InputError("argument", name, f"{user} needs the vertex positions",
+                                     f"pass positions_t0 (and positions_t1 for CCD) {when}")
                 continue
             if not isinstance(value, wp.array) or value.dtype != wp.vec3 or value.ndim != 1:
                 raise InputError("argument", name, f"got {type(value).__name__}, not a 1-D wp.array of vec3",
@@ -787,15 +831,6 @@ class SpatialHash:
         if positions_t1 is not None and positions_t1.shape != positions_t0.shape:
             raise InputError("argument", "positions_t1", f"shape {positions_t1.shape} != positions_t0's "
                              f"{positions_t0.shape}", "pass both ends of the step for the same vertices")
-        half = float(half_distance)
-        if not math.isfinite(half) or half < 0.0:
-            raise InputError("argument", "half_distance", f"{half_distance!r} is not a finite number >= 0",
-                             "pass the half distance the boxes were grown by")
-        slab.enabled = 1
-        slab.positions_t0 = positions_t0
-        slab.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
-        slab.swept = 0 if positions_t1 is None else 1
-        return slab, float(np.float32(half))
 
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when
@@ -922,7 +957,7 @@ class SpatialHash:
         return args
 
     def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, diagonals: kernels.DiagonalArgs,
-                    node_bits: int) -> None:
+                    shared: shared_vertex.SharedVertexArgs, node_bits: int) -> None:
         """The test pass: ``test_threads`` threads, each a contiguous chunk of the live BV tests."""
         tables = kernels.TableArgs()
         tables.entry_key = self.entry_key
@@ -934,7 +969,7 @@ class SpatialHash:
         tables.row_scan = self.row_scan
         tables.entry_code = self.entry_code
         wp.launch(row_kernels._test_bounding_volumes, dim=self.test_threads,
-                  inputs=[face_lower, face_upper, diagonals, self.faces, int(self.skip_adjacent), self.grid, node_bits,
+                  inputs=[face_lower, face_upper, diagonals, shared, self.grid, node_bits,
                           tables, self.info, self.pair_capacity],
                   outputs=[self.counts, self.pairs], device=self.device)
 

@@ -150,7 +150,7 @@ def pick_axis(m: mask_type, mean_normal: wp.vec3, directions: wp.array(dtype=wp.
 
 
 @wp.func
-def _signed_area(o: wp.vec3, a: wp.vec3, b: wp.vec3, l: wp.vec3, margin: float) -> float:
+def signed_area(o: wp.vec3, a: wp.vec3, b: wp.vec3, l: wp.vec3, margin: float) -> float:
     """S(o, a, b; l) = ((o - b) x (a - b)) . l, or 0 when within the rounding margin of 0."""
     p = o - b
     q = a - b
@@ -186,13 +186,13 @@ def contour_test(
         return False
     v0 = positions[loop[begin]]
     v1 = positions[loop[begin + 1]]
-    s0 = wp.sign(_signed_area(o, v0, v1, l, margin))
+    s0 = wp.sign(signed_area(o, v0, v1, l, margin))
     if s0 == 0.0:
         return False
     for i in range(count):
         a = positions[loop[begin + i]]
         b = positions[loop[begin + (i + 1) % count]]
-        if wp.sign(_signed_area(o, a, b, l, margin)) != s0:
+        if wp.sign(signed_area(o, a, b, l, margin)) != s0:
             return False
     # Ray through the midpoint of the first edge, projected onto the plane orthogonal to l.
     r = 0.5 * (v0 + v1) - o
@@ -222,7 +222,7 @@ def _bernstein_sign(b0: float, b1: float, b2: float, scale0: float, scale1: floa
 
 
 @wp.func
-def _swept_signed_area(
+def swept_signed_area_sign(
     o0: wp.vec3, a0: wp.vec3, b0: wp.vec3, o1: wp.vec3, a1: wp.vec3, b1: wp.vec3, l: wp.vec3, margin: float
 ) -> float:
     """Strict sign of S(o(t), a(t), b(t); l) over t in [0, 1] from its quadratic Bernstein form."""
@@ -254,14 +254,14 @@ def contour_test_swept(
     count = end - begin
     if count < 3:
         return False
-    s0 = _swept_signed_area(o0, positions_t0[loop[begin]], positions_t0[loop[begin + 1]],
+    s0 = swept_signed_area_sign(o0, positions_t0[loop[begin]], positions_t0[loop[begin + 1]],
                             o1, positions_t1[loop[begin]], positions_t1[loop[begin + 1]], l, margin)
     if s0 == 0.0:
         return False
     for i in range(count):
         ia = loop[begin + i]
         ib = loop[begin + (i + 1) % count]
-        s = _swept_signed_area(o0, positions_t0[ia], positions_t0[ib], o1, positions_t1[ia], positions_t1[ib],
+        s = swept_signed_area_sign(o0, positions_t0[ia], positions_t0[ib], o1, positions_t1[ia], positions_t1[ib],
                                l, margin)
         if s != s0:
             return False

@@ -54,7 +54,10 @@ def test_without_rest_the_detector_culls_more_than_in_the_first_shape() -> None:
         detector = CollisionDetector(mesh.faces, method="pscc", rest=rest, device="cpu")
         detector.detect(mesh.vertices_end, thickness=radius)
         pairs[label] = detector.detect(mesh.vertices_end, thickness=radius).stats["triangle_pairs"]
-    assert pairs["intrinsic"] < 0.8 * pairs["first shape"], pairs
+    # Both certify the pairs that share a vertex (pscc.collision.shared_vertex); what the BVH's shape
+    # changes is the pairs across the surface: 6,246 against 6,914 here (16,904 against 26,176 with
+    # the vertex-sharing pairs, before they were certified).
+    assert pairs["intrinsic"] < 0.95 * pairs["first shape"], pairs
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -12,6 +12,7 @@ from pscc.collision.detector import CollisionDetector
 from pscc.collision.feature_pairs import ownership_bits
 from pscc.errors import InputError
 from pscc.mesh import MeshTopology, folded_sheet, grid_sheet, twisted_sheet
+from tests.collision.shared_oracle import meet_only_in_shared, shared_vertex_ids
 
 
 def _rows(result):
@@ -56,8 +57,17 @@ def _owners(faces: np.ndarray, vertex_count: int):
     return vertex_owner, edge_owner, edge_index
 
 
+def _culled_legitimately(fa: int, fb: int, node_id: np.ndarray, faces: np.ndarray, x: np.ndarray) -> bool:
+    """A pscc DCD row may be missing when its two owner faces lie in one front node, or share a vertex
+    or an edge and meet only there (float64 reference; ``pscc.collision.shared_vertex``)."""
+    if node_id[fa] == node_id[fb]:
+        return True
+    return bool(shared_vertex_ids(faces[fa], faces[fb])) and meet_only_in_shared(faces[fa], faces[fb], x)
+
+
 def _check_dcd_contract(faces, x, thickness, detectors):
-    """spatial-hash == brute force; pscc is a subset whose missing pairs lie inside one front node."""
+    """spatial-hash == brute force; pscc is a subset whose missing pairs lie inside one front node or
+    join two faces certified to meet only in a shared vertex or edge."""
     reference_vf, reference_ee = _rows(detectors["brute-force"].detect(x, thickness=thickness))
     _assert_same_contacts(detectors["spatial-hash"].detect(x, thickness=thickness),
                           detectors["brute-force"].detect(x, thickness=thickness), faces, x, None, thickness,
@@ -68,10 +78,10 @@ def _check_dcd_contract(faces, x, thickness, detectors):
     node_id = pscc.front.node_id.numpy()
     vertex_owner, edge_owner, edge_index = _owners(faces, len(x))
     for v, f in reference_vf - culled_vf:
-        assert node_id[vertex_owner[v]] == node_id[f], f"pair ({v}, {f}) culled across front nodes"
+        assert _culled_legitimately(vertex_owner[v], f, node_id, faces, x), f"pair ({v}, {f}) culled"
     for a0, a1, b0, b1 in reference_ee - culled_ee:
         ea, eb = edge_index[(a0, a1)], edge_index[(b0, b1)]
-        assert node_id[edge_owner[ea]] == node_id[edge_owner[eb]], "edge pair culled across front nodes"
+        assert _culled_legitimately(edge_owner[ea], edge_owner[eb], node_id, faces, x), "edge pair culled"
 
 
 def _detectors(faces, rest=None, object_ids=None, rigid=(), shrink_interval=5):
