@@ -258,9 +258,10 @@ def bench_frame(frame: CorpusFrame, device: str, repeats: int, with_newton: bool
         gave the host call's rows) and the method's counts; ``ratios`` map each pscc row key (``pscc``,
         ``pscc-no-rest``) to its triangle pairs over spatial-hash's, whether its colliding pairs are a
         subset of spatial-hash's and what fraction of them it finds (in DCD pscc culls pairs inside one
-        front node), and, against every other method, ``time_vs_<method>`` (pscc's graph replay over
-        the other's faster of call and replay) and ``host_vs_<method>`` (pscc's host call over the
-        other's call), each the median of per-repeat ratios.
+        front node or between two certified neighbouring faces), and, against every other method,
+        ``time_vs_<method>`` (pscc's graph replay over the other's faster of call and replay) and
+        ``host_vs_<method>`` (pscc's host call over the other's call), each the median of per-repeat
+        ratios.
     """
     runners, missing = _runners(frame, device, with_newton, with_ipctk)
     seconds, results = _alternate(runners, repeats)
@@ -374,8 +375,10 @@ def report(results: dict[str, Any]) -> list[str]:
         "LBVH on one thread, at most spatial-hash's. `time` ratios: pscc's graph replay over the other",
         "method's faster of call and replay (ipctk: its call); `host` ratios: pscc's host call over the other's",
         "call. `found`: pscc's colliding pairs (VF + EE) over spatial-hash's, which are brute force's. In DCD",
-        "pscc returns a subset (checked): features of one front node closer than the radius are culled,",
-        "because the node's certificate is about intersection, not distance (`docs/pscc.md`).",
+        "pscc returns a subset (checked): features of one front node, or of two neighbouring faces certified",
+        "to meet only in what they share, closer than the radius are culled, because the certificates are",
+        "about intersection, not distance (`docs/pscc.md`; on the shirt, whose radius is half its median",
+        "edge, most rows join neighbouring faces).",
         "",
         "| frame | pscc | pairs / spatial-hash | pairs / spatial-hash (26-DOP) | found | time / spatial-hash "
         "| time / newton | host / newton | time / ipctk 1 thread | host / ipctk 1 thread | time / ipctk 2 threads |",
