@@ -448,6 +448,7 @@ class SpatialHash:
         face_order: wp.array | None = None,
         face_diagonal_lower: wp.array | None = None,
         face_diagonal_upper: wp.array | None = None,
+        certify_shared: bool = False,
     ) -> tuple[wp.array, int]:
         """All face pairs (a < b) whose closed boxes overlap and whose node ids differ (with the
         group slab test: less the pairs of groups separated along a group axis, none of which is
@@ -482,6 +483,8 @@ class SpatialHash:
                 With them (both or neither) a face pair is emitted only when its slabs overlap on the
                 ten diagonals as well: the faces' 26-DOPs overlap.
             face_diagonal_upper: (face_count,) ``vec10`` upper ends, or ``None``.
+            certify_shared: also drop pairs of faces that share a vertex or an edge and are certified
+                to meet only there (:meth:`find_pairs_device`); needs ``faces`` and ``positions_t0``.
 
         Returns:
             ``(pairs, count)``: a (count,) ``wp.vec2i`` view of the internal buffer, sorted by
@@ -500,7 +503,7 @@ class SpatialHash:
                                    positions_t1=positions_t1, half_distance=half_distance,
                                    node_id_bound=node_id_bound, face_order=face_order, cell_size=cell_size,
                                    face_diagonal_lower=face_diagonal_lower,
-                                   face_diagonal_upper=face_diagonal_upper)
+                                   face_diagonal_upper=face_diagonal_upper, certify_shared=certify_shared)
             if self.check_capacity():
                 return self.pairs[: self._pair_count], self._pair_count
 
