@@ -360,6 +360,33 @@ def test_ctrl_c_exits_130_with_one_line_and_the_run_resumes(tmp_path: Path) -> N
     assert len(list((out / "frames").glob("frame_*.npz"))) == 61
 
 
+@pytest.mark.parametrize("resume", [False, True])
+def test_an_interrupt_right_after_the_folder_is_claimed_never_leaves_it_running(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, resume: bool) -> None:
+    # A cancelled batch task can be interrupted at any bytecode, also just after run.json says "running".
+    out = tmp_path / "r"
+    args = ["simulate", "twist", "--frames", "6", *SMALL, "--checkpoint-every", "3", "--out-dir", str(out)]
+    if resume:
+        assert main([*args[:2], "--frames", "3", *args[4:]]) == 0
+    real_claim = RunFolder.claim
+
+    def claim_then_interrupt(self: RunFolder) -> None:
+        real_claim(self)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(RunFolder, "claim", claim_then_interrupt)
+    assert main([*args, "--resume"] if resume else args) == 130
+    capsys.readouterr()
+    if resume:  # the run keeps its frames and checkpoint, and says it was interrupted
+        run = json.loads((out / "run.json").read_text())
+        assert run["status"] == "interrupted" and run["checkpoint"] == 3
+    else:  # nothing was written yet: nothing is kept
+        assert not (out / "run.json").exists()
+    monkeypatch.setattr(RunFolder, "claim", real_claim)
+    assert main([*args, "--resume"] if resume else args) == 0
+    assert json.loads((out / "run.json").read_text())["status"] == "done"
+
+
 def test_keyboard_interrupt_before_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     def interrupted(args: object) -> int:
         raise KeyboardInterrupt

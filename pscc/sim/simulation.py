@@ -170,10 +170,12 @@ class Simulation:
             except InputError as error:
                 raise InputError(str(folder.checkpoint_path), error.field, error.problem, error.fix) from None
             self.frame, self.frame_stats = start, frame_stats
-        folder.claim()
         self._last_checkpoint = start
         self._last_written = start if resume else -1
         try:
+            # Inside the try: an interrupt that lands just after run.json says "running" (a cancelled
+            # batch task) must still record the stop.
+            folder.claim()
             for pattern in _series_patterns(formats):
                 folder.record_series(pattern, frames)
             folder.record(*(["animation.usd"] if "usd" in formats else []), CHECKPOINT_FILE, "stats.json")
