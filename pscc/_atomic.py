@@ -6,6 +6,11 @@ sees the old file or the new one, never half a file; a failed or interrupted wri
 Ctrl-C) removes its temporary file; a process killed with ``kill -9`` leaves at most a hidden
 ``.*.tmp*`` file that :func:`is_temporary` recognises.
 
+:func:`write_atomic` (and the ``write_*_atomic`` helpers) hold SIGINT and SIGTERM while they write,
+in the main thread: a Ctrl-C or SIGTERM that arrives meanwhile is handled as soon as the file is in
+place. A serializer interrupted half-way (``np.savez``'s zip file) could otherwise fail in its own
+clean-up and replace the interrupt with that error.
+
 Finished files get the permissions of an ordinary new file (``0666 & ~umask``, e.g. 0644), or
 keep those of the file they replace. Operating-system failures (a full disk, a read-only or
 missing folder, a path that is a folder) become :class:`pscc.errors.OutputError`, whose message
@@ -17,7 +22,9 @@ from __future__ import annotations
 import errno
 import json
 import os
+import signal
 import tempfile
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,6 +36,7 @@ __all__ = [
     "atomic_output",
     "is_temporary",
     "output_error",
+    "signals_held",
     "write_atomic",
     "write_bytes_atomic",
     "write_json_atomic",
@@ -132,13 +140,52 @@ def _remove_quietly(path: Path) -> None:
         pass
 
 
+_HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM for the block (main thread only; elsewhere Python delivers no signals):
+    one that arrives meanwhile goes to the handler it was meant for when the block ends, so its
+    exception (``KeyboardInterrupt``, the CLI's ``Terminated``) is raised there. Handlers installed
+    outside Python are left alone, and nothing is held then."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {number: signal.getsignal(number) for number in _HELD_SIGNALS}
+    if any(handler is None for handler in previous.values()):
+        yield
+        return
+    arrived: list[tuple[int, Any]] = []
+
+    def hold(number: int, frame: Any) -> None:
+        arrived.append((number, frame))
+
+    try:
+        for number in _HELD_SIGNALS:
+            signal.signal(number, hold)
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        if arrived:
+            number, frame = arrived[0]
+            handler = previous[number]
+            if callable(handler):
+                handler(number, frame)
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), number)  # its default action, now that it is restored
+
+
 def write_atomic(path: Path | str, write: Callable[[IO[bytes]], Any], *, field: str = "path") -> Path:
     """Write ``path`` atomically by calling ``write(stream)`` on a binary stream; return ``path``.
+
+    SIGINT and SIGTERM are held until the file is in place (:func:`signals_held`).
 
     Raises:
         OutputError: see :func:`atomic_output`.
     """
-    with atomic_output(path, field=field) as temporary, open(temporary, "wb") as stream:
+    with signals_held(), atomic_output(path, field=field) as temporary, open(temporary, "wb") as stream:
         write(stream)
     return Path(path)
 

@@ -42,7 +42,14 @@ from typing import Any
 
 import numpy as np
 
-from pscc._atomic import is_temporary, output_error, write_bytes_atomic, write_json_atomic, write_text_atomic
+from pscc._atomic import (
+    is_temporary,
+    output_error,
+    signals_held,
+    write_bytes_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
 from pscc.errors import InputError
 
 __all__ = ["CHECKPOINT_FILE", "LOCK_FILE", "MANIFEST_FILE", "RUN_FILE", "RunFolder", "identity_differences",
@@ -430,8 +437,9 @@ class RunFolder:
         arrays["identity"] = np.frombuffer(self._identity_digest(), dtype=np.uint8)
         arrays["digest"] = np.frombuffer(_digest(arrays), dtype=np.uint8)
         buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
-        write_bytes_atomic(self.checkpoint_path, buffer.getvalue(), field="--out-dir")
+        with signals_held():  # np.savez interrupted half-way fails in its clean-up, hiding the interrupt
+            np.savez(buffer, **arrays)
+            write_bytes_atomic(self.checkpoint_path, buffer.getvalue(), field="--out-dir")
 
     def load_checkpoint(self) -> tuple[dict[str, np.ndarray], int, list[dict[str, Any]]]:
         """``(state, frame, frame_stats)`` of the last checkpoint.
