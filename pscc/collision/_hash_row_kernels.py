@@ -524,9 +524,9 @@ def _test_bounding_volumes(
     ``diagonals.enabled`` a test is of the faces' 26-DOPs: the boxes, then (only for boxes that overlap
     in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
     the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
-    order); the codes never reject a pair whose boxes overlap. Last, a pair of faces that share a vertex
-    is dropped with ``shared.mode`` skip, or with certify when its two faces are certified
-    (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
+    order); the codes never reject a pair whose boxes overlap. A pair of faces that share a vertex is
+    dropped with ``shared.mode`` skip (before the diagonals), or with certify, after every other test,
+    when its two faces are certified (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
     total = info[_LIVE_TESTS]
     chunk = info[_TEST_CHUNK]
     k = wp.int64(wp.tid()) * chunk

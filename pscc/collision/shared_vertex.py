@@ -60,7 +60,7 @@ its faces' normals are 152 degrees apart (opened 28 degrees), as a front node ho
 a simulator's CCD then sees the fold closing before the faces come within a thickness of each other,
 as it did before this certificate (the exact half-plane argument would allow almost 180)."""
 
-_CONE_COS_SQ = wp.constant(float(np.cos(np.radians(CONE_HALF_ANGLE_DEGREES)) ** 2))
+_CONE_COS = wp.constant(float(np.cos(np.radians(CONE_HALF_ANGLE_DEGREES))))
 
 
 @wp.struct
@@ -91,19 +91,19 @@ def shares_vertex(ta: wp.vec3i, tb: wp.vec3i) -> bool:
 
 
 @wp.func
-def _sees(d: wp.vec3, n: wp.vec3, scale_sq: float, margin: float, allow_zero: bool) -> bool:
-    """d . n > margin |d| scale (>= with ``allow_zero``), compared squared (no square root), with
-    ``scale_sq`` the square of the sum of the edge-length products that n is made of: beyond the float32
-    rounding of n and of the dot product (below 8 u of the same products of lengths,
-    :data:`~pscc.tolerances.NORMAL_CONE_MARGIN`), so the true sign is the sign tested. Without
-    ``allow_zero`` n must also lie within :data:`CONE_HALF_ANGLE_DEGREES` of d."""
+def _sees(d: wp.vec3, n: wp.vec3, scale: float, margin: float, allow_zero: bool) -> bool:
+    """d . n > margin |d| scale (>= with ``allow_zero``), with ``scale`` the sum of the edge-length
+    products that n is made of: beyond the float32 rounding of n and of the dot product (below 8 u of the
+    same products of lengths, :data:`~pscc.tolerances.NORMAL_CONE_MARGIN`), so the true sign is the sign
+    tested. Without ``allow_zero`` n must also lie within :data:`CONE_HALF_ANGLE_DEGREES` of d. Lengths,
+    not their squares: the bounds stay normal float32 numbers over the whole coordinate range
+    (products of two lengths, :data:`~pscc.tolerances.MIN_COORDINATE_SCALE`)."""
     value = wp.dot(d, n)
-    if value < 0.0:
-        return False
-    bound = margin * margin * wp.dot(d, d) * scale_sq
+    length_d = wp.length(d)
+    bound = margin * length_d * scale
     if allow_zero:
-        return value * value >= bound
-    return value * value > wp.max(bound, _CONE_COS_SQ * wp.dot(d, d) * wp.dot(n, n))
+        return value >= bound
+    return value > wp.max(bound, _CONE_COS * length_d * wp.length(n))
 
 
 @wp.func
@@ -124,13 +124,16 @@ def _swept_face_seen(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), t
     e20 = x0[t[2]] - x0[t[0]]
     e11 = x1[t[1]] - x1[t[0]]
     e21 = x1[t[2]] - x1[t[0]]
-    if not _sees(d, wp.cross(e10, e20), wp.dot(e10, e10) * wp.dot(e20, e20), margin, False):
+    l10 = wp.length(e10)
+    l20 = wp.length(e20)
+    l11 = wp.length(e11)
+    l21 = wp.length(e21)
+    if not _sees(d, wp.cross(e10, e20), l10 * l20, margin, False):
         return False
-    if not _sees(d, wp.cross(e11, e21), wp.dot(e11, e11) * wp.dot(e21, e21), margin, False):
+    if not _sees(d, wp.cross(e11, e21), l11 * l21, margin, False):
         return False
     nx = 0.5 * (wp.cross(e10, e21) + wp.cross(e11, e20))
-    scale = 0.5 * (wp.length(e10) * wp.length(e21) + wp.length(e11) * wp.length(e20))
-    return _sees(d, nx, scale * scale, margin, True)
+    return _sees(d, nx, 0.5 * (l10 * l21 + l11 * l20), margin, True)
 
 
 @wp.func
@@ -157,8 +160,8 @@ def _common_direction(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), 
     na = wp.cross(ea1, ea2)
     nb = wp.cross(eb1, eb2)
     d = _unit(na) + _unit(nb)
-    if (_sees(d, na, wp.dot(ea1, ea1) * wp.dot(ea2, ea2), margin, False)
-            and _sees(d, nb, wp.dot(eb1, eb1) * wp.dot(eb2, eb2), margin, False)):
+    if (_sees(d, na, wp.length(ea1) * wp.length(ea2), margin, False)
+            and _sees(d, nb, wp.length(eb1) * wp.length(eb2), margin, False)):
         return d
     return zero
 
@@ -166,7 +169,7 @@ def _common_direction(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), 
 @wp.func
 def _sector_sign(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), swept: int, margin: float, v: int,
                  x: int, y: int, d: wp.vec3) -> float:
-    """Strict sign of s(x, y) = d . ((x - v) x (y - v)) at t0 (compared squared against the margin times
+    """Strict sign of s(x, y) = d . ((x - v) x (y - v)) at t0 (beyond the margin times
     |d| |x - v| |y - v|), or over the whole step (d then a unit vector); 0 when it is within the
     rounding margin or changes."""
     if swept == 1:
@@ -174,7 +177,7 @@ def _sector_sign(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), swept
     p = x0[x] - x0[v]
     q = x0[y] - x0[v]
     value = wp.dot(d, wp.cross(p, q))
-    if value * value <= margin * margin * wp.dot(d, d) * wp.dot(p, p) * wp.dot(q, q):
+    if wp.abs(value) <= margin * wp.length(d) * wp.length(p) * wp.length(q):
         return 0.0
     return wp.sign(value)
 

@@ -255,14 +255,14 @@ def contour_test_swept(
     if count < 3:
         return False
     s0 = swept_signed_area_sign(o0, positions_t0[loop[begin]], positions_t0[loop[begin + 1]],
-                            o1, positions_t1[loop[begin]], positions_t1[loop[begin + 1]], l, margin)
+                                o1, positions_t1[loop[begin]], positions_t1[loop[begin + 1]], l, margin)
     if s0 == 0.0:
         return False
     for i in range(count):
         ia = loop[begin + i]
         ib = loop[begin + (i + 1) % count]
-        s = swept_signed_area_sign(o0, positions_t0[ia], positions_t0[ib], o1, positions_t1[ia], positions_t1[ib],
-                               l, margin)
+        s = swept_signed_area_sign(o0, positions_t0[ia], positions_t0[ib], o1, positions_t1[ia],
+                                   positions_t1[ib], l, margin)
         if s != s0:
             return False
     # Fixed ray chosen at t0; sigma_i(t) is linear, so equal strict signs at both ends hold throughout.

@@ -155,6 +155,39 @@ def test_swept_certificate_holds_at_every_time_of_the_step(seed: int, share_edge
             assert meet_only_in_shared(face_a[i], face_b[i], xt), (i, t)
 
 
+def test_small_steps_are_certified_and_hold_throughout() -> None:
+    # Not a vacuous swept test: small random motions of near-flat pairs are mostly certified.
+    rng = np.random.default_rng(11)
+    for share_edge in (True, False):
+        face_a, face_b, x0 = _random_pairs(rng, 300, share_edge, 1.0)
+        static = certified(face_a, face_b, x0)
+        x1 = (x0 + rng.normal(0.0, 0.002, x0.shape)).astype(np.float32)
+        swept = certified(face_a, face_b, x0, x1)
+        assert swept.sum() > 0.5 * static.sum() > 10, (share_edge, swept.sum(), static.sum())
+        for i in np.flatnonzero(swept)[:40]:
+            for t in np.linspace(0.0, 1.0, 9):
+                xt = (1.0 - t) * x0.astype(np.float64) + t * x1.astype(np.float64)
+                assert meet_only_in_shared(face_a[i], face_b[i], xt), (i, t)
+
+
+@pytest.mark.parametrize(("scale", "offset"), [(1e-9, 1e-6), (1e8, 0.0)])
+def test_decisions_hold_at_both_ends_of_the_coordinate_range(scale: float, offset: float) -> None:
+    # The smallest edges the coordinate range admits (1e-9 at |x| ~ 1e-6, tolerances.MIN_COORDINATE_SCALE)
+    # and the largest coordinates: the margins are products of two lengths (no squares, which would
+    # flush to zero at 1e-9), and the clear-cut cases decide as at unit scale.
+    ring = [[math.cos(math.radians(t)), math.sin(math.radians(t)), 0.0] for t in (0, 60, 120, 180)]
+    fan = np.array([[0.0, 0.0, 0.0], *ring], np.float32)
+    through = fan.copy()
+    through[3] = [0.6, 0.25, 0.2]
+    through[4] = [0.6, 0.35, -0.2]
+    cases = [([0, 1, 2], [0, 3, 4], fan, True), ([0, 1, 2], [0, 3, 4], through, False),
+             ([0, 1, 2], [2, 1, 3], _hinge(60.0), True), ([0, 1, 2], [2, 1, 3], _hinge(0.0), False)]
+    for face_a, face_b, x, expected in cases:
+        scaled = (x.astype(np.float64) * scale + offset).astype(np.float32)
+        assert certified([face_a], [face_b], scaled)[0] == expected, (face_a, face_b, expected)
+        assert certified([face_a], [face_b], scaled, scaled)[0] == expected, (face_a, face_b, expected)
+
+
 def test_a_hinge_folding_through_within_the_step_is_not_certified() -> None:
     # B's free vertex moves straight down from 0.87 above A to 0.87 below it: at mid-step it lies
     # inside A. Both ends are hinges opened 60 degrees (certified at one instant); the step is not.
