@@ -60,3 +60,26 @@ def count_host_traffic() -> Iterator[dict[str, int]]:
         wp.array.__init__ = original_init
         for owner, name, original in reversed(patches):
             setattr(owner, name, original)
+
+
+def device_path_traffic(device: wp.Device | str, run: Callable[[], Any], calls: int = 1) -> dict[str, int]:
+    """Host traffic of ``calls`` runs of ``run`` the way the device path runs it.
+
+    On the CPU ``run`` is called directly: Warp's ``capture_while`` reads its condition from memory
+    there. On CUDA an eager ``capture_while`` synchronizes once per iteration to read its condition,
+    so the device path is a graph: ``run`` is recorded once (outside the count) and the graph is
+    replayed ``calls`` times inside it. Call ``run`` once before, so that modules are loaded and
+    buffers sized outside the capture.
+    """
+    if wp.get_device(device).is_cpu:
+        with count_host_traffic() as counts:
+            for _ in range(calls):
+                run()
+        return counts
+    with wp.ScopedCapture(device=device) as capture:
+        run()
+    with count_host_traffic() as counts:
+        for _ in range(calls):
+            wp.capture_launch(capture.graph)
+    wp.synchronize_device(device)
+    return counts

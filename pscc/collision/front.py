@@ -54,6 +54,7 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc._reductions import PrefixSum
 from pscc.collision._front_kernels import (
     NodeTestArgs,
     _advance_sprout,
@@ -111,6 +112,7 @@ class NormalConeFront:
         n = bvh.node_count
         self.front = wp.zeros(n, dtype=wp.int32, device=device)
         self.front_count = wp.zeros(1, dtype=wp.int32, device=device)
+        self._scan = PrefixSum(device, n)  # allocation-free inside the shrink and sprout loops on CUDA
         self.calls = wp.zeros(1, dtype=wp.int64, device=device)
         self._frontier_count = wp.zeros(1, dtype=wp.int32, device=device)
         # The per-call tables (node masks and normals, frontiers, flags, scans, sort buffers): in lent
@@ -321,7 +323,7 @@ class NormalConeFront:
         launches["clear_in_front"].launch()
         launches["mark_front"].launch()
         launches["shrink_pairs"].launch()
-        wp.utils.array_scan(self.in_front, self._keep_offsets, inclusive=False)
+        self._scan(self.in_front, self._keep_offsets, inclusive=False)
         launches["finish_shrink_round"].launch()
         launches["compact_flags"].launch()
 
@@ -329,8 +331,8 @@ class NormalConeFront:
         """Body of the sprout loop (runs while the frontier is not empty): test one level."""
         launches = self._launches
         launches["test_frontier"].launch()
-        wp.utils.array_scan(self._keep, self._keep_offsets, inclusive=False)
-        wp.utils.array_scan(self._split, self._split_offsets, inclusive=False)
+        self._scan(self._keep, self._keep_offsets, inclusive=False)
+        self._scan(self._split, self._split_offsets, inclusive=False)
         launches["scatter_frontier"].launch()
         launches["advance_sprout"].launch()
         launches["copy_frontier"].launch()

@@ -84,6 +84,7 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc._reductions import PrefixSum
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision import shared_vertex
@@ -210,6 +211,7 @@ class SpatialHash:
             raise InputError("argument", "pair_capacity", f"{pair_capacity!r} is not an integer >= 0",
                              "pass a non-negative integer or None")
         self.device = wp.get_device(device)
+        self._scan = PrefixSum(self.device)  # allocation-free inside the grid loop (and a step's loop) on CUDA
         if tests_per_thread is None:
             tests_per_thread = 1 if self.device.is_cuda else 64
         if isinstance(tests_per_thread, bool) or not isinstance(tests_per_thread, int) or tests_per_thread < 1:
@@ -879,7 +881,7 @@ class SpatialHash:
         wp.launch(kernels._count_face_cells, dim=m,
                   inputs=[face_lower, face_upper, self.grid, node_id, node_limit, order, ordered],
                   outputs=[self.face_cells, self.grid_max], device=dev)
-        wp.utils.array_scan(self.face_cells, self.face_end, inclusive=True)
+        self._scan(self.face_cells, self.face_end, inclusive=True)
         wp.launch(kernels._check_grid, dim=1,
                   inputs=[self.face_end, self.scene, max_entries, min(MAX_GRID_CELLS, 1 << self.cell_bits),
                           self.entry_capacity],
@@ -909,8 +911,8 @@ class SpatialHash:
         g = self.group_capacity
         wp.launch(kernels._mark_runs, dim=n, inputs=[self.entry_key, node_bits, self.info],
                   outputs=[self.group_start, self.cell_end], device=dev)
-        wp.utils.array_scan(self.group_start, self.group_rank, inclusive=True)
-        wp.utils.array_scan(self.cell_end, self.cell_rank, inclusive=True)
+        self._scan(self.group_start, self.group_rank, inclusive=True)
+        self._scan(self.cell_end, self.cell_rank, inclusive=True)
         wp.launch(kernels._write_tables, dim=n,
                   inputs=[self.entry_key, self.group_rank, self.cell_rank, node_bits, self.info],
                   outputs=[self.group_start, self.group_end, self.group_cell, self.cell_end], device=dev)
@@ -927,7 +929,7 @@ class SpatialHash:
                   inputs=[self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
                           self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys],
                   outputs=[self.group_mask, self.row_count, self.info], device=dev)
-        wp.utils.array_scan(self.row_count, self.row_end, inclusive=True)
+        self._scan(self.row_count, self.row_end, inclusive=True)
         wp.launch(row_kernels._gather_row_info, dim=1,
                   inputs=[self.row_end, self.row_capacity, self.test_threads, self.tests_per_thread,
                           self.cell_code_min_tests],
@@ -936,7 +938,7 @@ class SpatialHash:
                   inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
                           self.group_mask, slab.enabled, check_keys, self.row_count, self.row_end, self.info],
                   outputs=[self.row_span, self.row_work], device=dev)
-        wp.utils.array_scan(self.row_work, self.row_scan, inclusive=True)
+        self._scan(self.row_work, self.row_scan, inclusive=True)
         wp.launch(row_kernels._write_entry_codes, dim=n,
                   inputs=[self.entry_key, self.entry_face, face_lower, face_upper, self.grid, node_bits, self.info],
                   outputs=[self.entry_code], device=dev)

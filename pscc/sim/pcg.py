@@ -3,7 +3,9 @@
 The algorithm is textbook PCG (the one ``warp.optim.linear.cg`` runs). It is written out here
 because, on Warp 1.19's CPU device, that solver's tiled dot-product kernels take about 5 ms per
 dot product for 15,000 unknowns (a 10K-triangle cloth spent 96 % of its step in them), while
-``wp.utils.array_inner`` takes 0.08 ms; on a GPU both are fast.
+``wp.utils.array_inner`` takes 0.08 ms. On a GPU ``wp.utils.array_inner`` asks CUB for temporary memory
+at every call, which CUDA refuses inside the loop's conditional graph, so the dot products go through
+:class:`pscc._reductions.InnerProduct` (Warp's on the CPU, allocation-free tiled kernels on a GPU).
 
 Everything stays on the device: the scalars (alpha, beta, the dot products), the iteration count and
 the convergence test, which runs every ``check_every`` iterations and sets the condition of a
@@ -20,6 +22,8 @@ from collections.abc import Callable
 
 import warp as wp
 from warp.sparse import BsrMatrix, bsr_mv
+
+from pscc._reductions import InnerProduct
 
 wp.set_module_options({"enable_backward": False})
 
@@ -179,6 +183,7 @@ class PreconditionedConjugateGradient:
         self.p = wp.zeros(n, dtype=wp.vec3, device=device)
         self.ap = wp.zeros(n, dtype=wp.vec3, device=device)
         self.scalars = wp.zeros(5, dtype=float, device=device)
+        self._inner = InnerProduct(device, n)  # allocation-free inside the loop on CUDA
         self.counters = wp.zeros(2, dtype=wp.int32, device=device)
         self.running = wp.zeros(1, dtype=wp.int32, device=device)
         self._scalar_views = [self.scalars[k : k + 1] for k in range(5)]  # slicing costs Python time per call
@@ -200,7 +205,7 @@ class PreconditionedConjugateGradient:
         bsr_mv(self.matrix, x, y, alpha=1.0, beta=0.0)
 
     def _dot(self, a: wp.array, b: wp.array, slot: int) -> None:
-        wp.utils.array_inner(a, b, out=self._scalar_views[slot])
+        self._inner(a, b, self._scalar_views[slot])
 
     def _iterate(self) -> None:
         """``check_every`` iterations, then the convergence test that sets the loop condition."""

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from pscc.bench.host_traffic import count_host_traffic
+from pscc.bench.host_traffic import count_host_traffic, device_path_traffic
 from pscc.collision._front_kernels import NodeTestArgs, _node_passes
 from pscc.collision.bvh import MaterialBvh
 from pscc.collision.front import NormalConeFront
@@ -177,8 +177,7 @@ def test_update_reads_nothing_back(device: str) -> None:
     for source_t0, source_t1 in sources:
         wp.copy(p0, source_t0)
         wp.copy(p1, source_t1)
-        with count_host_traffic() as counts:
-            front.update(p0, p1)
+        counts = device_path_traffic(device, lambda: front.update(p0, p1))
         traffic = {key: traffic[key] + counts[key] for key in traffic}
         rounds += front.stats["shrink_rounds"]
     assert traffic == {"reads": 0, "syncs": 0, "uploads": 0, "allocations": 0}

@@ -317,8 +317,21 @@ def test_capture_replay_is_bit_identical(device: str, kind: str, ccd: bool) -> N
     wp.synchronize_device(scene.device)
     replayed = pipeline.snapshot()
     assert eager["counts"].sum() > 0 and eager["hit_counts"].sum() > 0
-    for key, value in eager.items():
-        np.testing.assert_array_equal(replayed[key].view(np.uint8), value.view(np.uint8), err_msg=key)
+    if wp.get_device(scene.device).is_cpu:
+        for key, value in eager.items():
+            np.testing.assert_array_equal(replayed[key].view(np.uint8), value.view(np.uint8), err_msg=key)
+    else:  # rows are appended in no fixed order on a GPU: the same rows, the same bits, the same poison after
+        for key in ("counts", "hit_counts", "pair_stats"):
+            np.testing.assert_array_equal(replayed[key], eager[key], err_msg=key)
+        for kind, count in (("vertex_face", eager["counts"][0]), ("edge_edge", eager["counts"][1])):
+            pairs, toi = replayed[f"{kind}_all"], replayed[f"{kind}_toi_all"]
+            want_pairs, want_toi = eager[f"{kind}_all"], eager[f"{kind}_toi_all"]
+            got_rows, want_rows = _sorted_rows(pairs[:count], toi[:count]), _sorted_rows(want_pairs[:count],
+                                                                                           want_toi[:count])
+            for a, b in zip(got_rows, want_rows, strict=True):
+                np.testing.assert_array_equal(a, b, err_msg=kind)
+            np.testing.assert_array_equal(pairs[count:], want_pairs[count:], err_msg=kind)
+            np.testing.assert_array_equal(toi[count:].view(np.uint32), want_toi[count:].view(np.uint32), err_msg=kind)
     # And a second replay (counters were reset by the graph, not accumulated).
     wp.capture_launch(capture.graph)
     wp.synchronize_device(scene.device)
