@@ -149,7 +149,9 @@ def report_scenes(results: dict[str, Any], plot: str | None) -> list[str]:
         "contact than the whole animation). Seconds per frame are the mean over the frames, solver set-up "
         "excluded; every frame is checked by ipctk's `has_intersections` (check time not included; the garment "
         "scenes by ipctk's edge-face test for crossings that involve the cloth, stitched pairs left out). The paper "
-        "reports 0.6-11 s per frame at 80K-1M triangles on a Titan Xp; this machine is a CPU. The runs use the "
+        "reports 0.6-11 s per frame at 80K-1M triangles on a Titan Xp; "
+        + ("this machine is a CPU. " if str(device).startswith("cpu") else f"this run is on {device}. ")
+        + "The runs use the "
         "host path (`Simulation(stage_timing=True)`), which times every stage; the default device path with "
         "graph replay is measured in the device-path section.",
         "",
