@@ -15,6 +15,7 @@ import numpy as np
 import warp as wp
 
 from pscc._checks import INT32_MAX, as_numpy, check_object_ids
+from pscc.collision.panel_alignment import aligned_face_corners
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import MeshData, check_stitches
 from pscc.mesh.topology import MeshTopology
@@ -178,13 +179,17 @@ def _sewn_components(panel_of_face: np.ndarray, partner_face: np.ndarray) -> np.
 
 def _face_geometry(faces: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, ...]:
     """Per-face material-space centroid, box corners and area (float64)."""
-    corners = material[faces]  # (m, 3, dim)
+    return _corner_geometry(material[faces])
+
+
+def _corner_geometry(corners: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Centroid, box corners and area (float64) of faces given by their (m, 3, dim) corners."""
     centroid = corners.mean(axis=1)
     lower = corners.min(axis=1)
     upper = corners.max(axis=1)
     e1 = corners[:, 1] - corners[:, 0]
     e2 = corners[:, 2] - corners[:, 0]
-    if material.shape[1] == 2:
+    if corners.shape[2] == 2:
         area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     else:
         area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
@@ -541,7 +546,11 @@ class MaterialBvh:
         rows = None if stitches is None else check_stitches(stitches, coords.shape[0], "argument")
         seams = _seam_matches(tris, topology, objects, rows)
         geometry = _face_geometry(tris, coords)
-        host = _build_tree(geometry, objects, topology, rigid, seams[0])
+        panel_root = _face_panels(topology, objects)
+        _, panel_of_face = np.unique(panel_root, return_inverse=True)
+        # The cuts see each panel turned so that its mesh lines run along the axes (panel_alignment).
+        split_geometry = _corner_geometry(aligned_face_corners(tris, coords, panel_of_face))
+        host = _build_tree(split_geometry, objects, topology, rigid, seams[0], panel_root)
         host.update(_build_contours(tris, coords, geometry, topology, host, seams))
         host = {name: values.astype(np.int32) if values.dtype.kind in "iu" else values
                 for name, values in host.items()}
@@ -583,7 +592,7 @@ def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology
 
 
 def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topology: MeshTopology,
-                rigid: frozenset[int], partner_face: np.ndarray) -> dict[str, np.ndarray]:
+                rigid: frozenset[int], partner_face: np.ndarray, panel_root: np.ndarray) -> dict[str, np.ndarray]:
     """Top-down, level-by-level construction of the node arrays (see :class:`MaterialBvh`)."""
     centroid, lower, upper, _ = geometry
     m, dim = centroid.shape
@@ -592,7 +601,6 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
     # Panels sewn together (matched seam edges, :func:`_seam_matches`) form a sewn component; the
     # panels of one component are kept consecutive (ordered by the component's mean panel centroid),
     # so the top tree joins sewn panels before anything else.
-    panel_root = _face_panels(topology, object_ids)
     panel_min_face, panel_of_face = np.unique(panel_root, return_inverse=True)
     panel_count = panel_min_face.shape[0]
     panel_size = np.bincount(panel_of_face, minlength=panel_count)
