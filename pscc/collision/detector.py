@@ -172,7 +172,7 @@ class CollisionDetector:
         self._lend_pair_buffers = False
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
-        self._last_ccd_thickness: float | None = None
+        self._last_ccd_thickness: tuple[float, float] | None = None
         self.topology: MeshTopology | None = None
         self.front: NormalConeFront | None = None
         self.bvh: MaterialBvh | None = None
@@ -512,7 +512,7 @@ class CollisionDetector:
 
     def narrow_phase_device(self, positions_t0: wp.array, positions_t1: wp.array | None = None,
                             thickness: float = 0.0, *, recheck: bool = False,
-                            defer_dcd: bool = False) -> DeviceContacts:
+                            defer_dcd: bool = False, inside_share: float = 0.0) -> DeviceContacts:
         """The narrow phase of :meth:`narrow_phase` on device arrays; the result stays on the device.
 
         Tests the candidates of the last broad phase (device or host path). With ``recheck`` (CCD),
@@ -523,6 +523,10 @@ class CollisionDetector:
         With ``defer_dcd`` (DCD only), the test itself is left to the caller's kernel, which writes the
         times of impact and hit counts (:meth:`NarrowPhase.run_device`; the proximity springs do, to find
         each pair's closest points once).
+
+        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair that starts within ``thickness`` is a
+        contact only if it comes within s times its start distance (:class:`NarrowPhase`'s
+        ``run_device``). A re-check keeps the same value.
 
         Returns:
             The :class:`DeviceContacts` view of the candidate rows, their times of impact and
@@ -538,6 +542,9 @@ class CollisionDetector:
         x0 = self._device_positions(positions_t0, "positions_t0")
         x1 = None if positions_t1 is None else self._device_positions(positions_t1, "positions_t1")
         h = check_thickness(thickness, "thickness")
+        if not 0.0 <= float(inside_share) < 1.0:
+            raise InputError("argument", "inside_share", f"{inside_share!r} is not in [0, 1)",
+                             "pass 0 (a pair inside the thickness is a contact at t = 0) or a share such as 0.5")
         if x1 is not None and self._broad_mode == "dcd":
             raise InputError("argument", "positions_t1", "the last broad phase was discrete (no end positions)",
                              "run a broad phase with end positions before a CCD narrow phase")
@@ -548,7 +555,7 @@ class CollisionDetector:
         if x1 is not None and recheck:
             moved = self.narrow.mark_moved(self._previous_t0, x0, self._previous_t1, x1)
         self.narrow.run_device(self.candidates, x0, x1 if x1 is not None else x0, h, moved=moved,
-                               defer_dcd=defer_dcd and x1 is None)
+                               defer_dcd=defer_dcd and x1 is None, inside_share=inside_share if x1 is not None else 0.0)
         if x1 is not None:
             wp.copy(self._previous_t0, x0)
             wp.copy(self._previous_t1, x1)
@@ -558,7 +565,7 @@ class CollisionDetector:
         return self.narrow.contacts(self.candidates, continuous=x1 is not None, thickness=h)
 
     def narrow_phase(self, positions: Any, positions_end: Any = None, thickness: float = 0.0,
-                     recheck: bool = False) -> CollisionResult | DeviceContacts:
+                     recheck: bool = False, inside_share: float = 0.0) -> CollisionResult | DeviceContacts:
         """Test the candidates of the last :meth:`broad_phase` (CCD when ``positions_end`` is given).
 
         With ``wp.array`` positions on the detector's device, this is :meth:`narrow_phase_device`: the
@@ -575,13 +582,17 @@ class CollisionDetector:
         previous result, which is exact because their trajectories are unchanged. Otherwise
         everything is tested.
 
+        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair that starts within ``thickness`` is a
+        contact only if it comes within s times its start distance (see :meth:`narrow_phase_device`).
+
         Raises:
             InputError: no broad phase has run, CCD after a discrete broad phase, a thickness
                 larger than the broad phase's (its candidates would not cover the query), or
                 positions or a thickness outside the supported range (see the class docstring).
         """
         if isinstance(positions, wp.array):
-            return self.narrow_phase_device(positions, positions_end, thickness, recheck=recheck)
+            return self.narrow_phase_device(positions, positions_end, thickness, recheck=recheck,
+                                            inside_share=inside_share)
         if self._broad_mode is None:
             raise InputError("argument", "narrow_phase", "no broad phase has run", "call broad_phase() first")
         x0, x1, h = self._inputs(positions, positions_end, thickness)
@@ -593,10 +604,10 @@ class CollisionDetector:
                              f"{h:g} exceeds the broad phase's thickness {self._broad_thickness:g}",
                              "run broad_phase() with at least the thickness the narrow phase uses")
         return self._narrow(x0, x1, h, upload=True, recheck=recheck and x1 is not None
-                            and self._last_ccd_thickness == h)
+                            and self._last_ccd_thickness == (h, inside_share), inside_share=inside_share)
 
     def _narrow(self, x0: np.ndarray, x1: np.ndarray | None, h: float, *, upload: bool,
-                recheck: bool = False) -> CollisionResult:
+                recheck: bool = False, inside_share: float = 0.0) -> CollisionResult:
         """Narrow phase on the current candidates through the device path, then the host copy;
         ``upload=False`` reuses the positions already on the device; ``recheck``: see
         :meth:`narrow_phase`."""
@@ -606,8 +617,8 @@ class CollisionDetector:
             if x1 is not None:
                 self._positions_t1.assign(x1)
         self.narrow_phase_device(self._positions_t0, self._positions_t1 if x1 is not None else None, h,
-                                 recheck=recheck)
-        self._last_ccd_thickness = h if x1 is not None else None
+                                 recheck=recheck, inside_share=inside_share)
+        self._last_ccd_thickness = (h, inside_share) if x1 is not None else None
         wp.synchronize_device(self.device)
         narrow_seconds = time.perf_counter() - mark
         mark = time.perf_counter()

@@ -38,12 +38,29 @@ from pscc.geometry import distance_tolerances
 from pscc.geometry.ccd import CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
 from pscc.geometry.distance import (
     edge_edge_closest_point,
+    edge_edge_distance_squared,
     edge_edge_distance_squared_at,
     vertex_face_closest_point,
+    vertex_face_distance_squared,
     vertex_face_distance_squared_at,
 )
 
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class CcdDistance:
+    """The distance a CCD run tests, and what it asks of pairs that start closer than it.
+
+    ``inside_share`` = 0: a pair that starts within ``distance`` is a contact at t = 0, as the CCD
+    defines it. ``inside_share`` = s > 0: such a pair (found at t = 0) is tested again at s times its
+    start distance, so it is a contact only if it comes that much closer within the step. End
+    positions cannot undo a contact at t = 0; with s > 0 a response can still keep the pair from
+    closing in, and the pair still never crosses.
+    """
+
+    distance: float
+    inside_share: float
 
 
 @wp.kernel
@@ -53,7 +70,7 @@ def _vertex_face_narrow(
     pairs: wp.array(dtype=wp.vec2i),
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
-    thickness: float,
+    distance: CcdDistance,
     params: CcdParameters,
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
@@ -65,7 +82,9 @@ def _vertex_face_narrow(
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows (``counts[0]``, clamped).
     With ``only_moved``, a pair none of whose vertices is marked in ``moved`` keeps its previous
-    result (its trajectory has not changed). Every valid row with toi <= 1 adds 1 to ``hit_counts[0]``."""
+    result (its trajectory has not changed). A pair found at t = 0 that starts within the distance is
+    tested again at ``inside_share`` of its start distance (:class:`CcdDistance`). Every valid row with
+    toi <= 1 adds 1 to ``hit_counts[0]``."""
     for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         v = pair[0]
@@ -82,8 +101,17 @@ def _vertex_face_narrow(
             toi = vertex_face_ccd_toi(
                 positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
                 positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
-                thickness, 0.0, params,
+                distance.distance, 0.0, params,
             )
+            if toi <= 0.0 and distance.inside_share > 0.0:
+                start = wp.sqrt(vertex_face_distance_squared(positions_t0[v], positions_t0[f[0]],
+                                                             positions_t0[f[1]], positions_t0[f[2]]))
+                if start < distance.distance:
+                    toi = vertex_face_ccd_toi(
+                        positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
+                        positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
+                        distance.inside_share * start, 0.0, params,
+                    )
             toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 0, 1)
@@ -96,7 +124,7 @@ def _edge_edge_narrow(
     pairs: wp.array(dtype=wp.vec2i),
     positions_t0: wp.array(dtype=wp.vec3),
     positions_t1: wp.array(dtype=wp.vec3),
-    thickness: float,
+    distance: CcdDistance,
     params: CcdParameters,
     moved: wp.array(dtype=wp.int32),
     only_moved: int,
@@ -107,7 +135,7 @@ def _edge_edge_narrow(
     hit_counts: wp.array(dtype=wp.int32),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid edge-edge rows (``counts[1]``, clamped;
-    ``moved``, ``only_moved``, ``hit_counts[1]``: as for vertex-face)."""
+    ``moved``, ``only_moved``, ``distance``, ``hit_counts[1]``: as for vertex-face)."""
     for i in range(wp.tid(), valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         a = edges[pair[0]]
@@ -124,8 +152,17 @@ def _edge_edge_narrow(
             toi = edge_edge_ccd_toi(
                 positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
                 positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
-                thickness, 0.0, params,
+                distance.distance, 0.0, params,
             )
+            if toi <= 0.0 and distance.inside_share > 0.0:
+                start = wp.sqrt(edge_edge_distance_squared(positions_t0[a[0]], positions_t0[a[1]],
+                                                           positions_t0[b[0]], positions_t0[b[1]]))
+                if start < distance.distance:
+                    toi = edge_edge_ccd_toi(
+                        positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
+                        positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
+                        distance.inside_share * start, 0.0, params,
+                    )
             toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 1, 1)
@@ -364,6 +401,7 @@ class NarrowPhase:
         thickness: float,
         moved: wp.array | None = None,
         defer_dcd: bool = False,
+        inside_share: float = 0.0,
     ) -> None:
         """Test the valid candidates of each kind, reading their numbers from ``candidates.counts``
         on the device (clamped to the buffers), and fill :attr:`hit_counts`.
@@ -385,6 +423,10 @@ class NarrowPhase:
                 same test in its own kernel (:meth:`proximity_test`, e.g.
                 :meth:`pscc.sim.proximity.ProximityContacts.test_and_update_device`) writes the times of
                 impact and the hit counts, bit for bit as this method would.
+            inside_share: CCD only: 0 (a pair that starts within ``thickness`` is a contact at t = 0),
+                or s in (0, 1): such a pair is a contact only if it comes within s times its start
+                distance (:class:`CcdDistance`; the simulator's response loop, which cannot undo a
+                contact at t = 0).
 
         Raises:
             ValueError: the toi buffers are shorter than the candidate buffers (call :meth:`reserve`).
@@ -416,12 +458,17 @@ class NarrowPhase:
             return
         only_moved = int(moved is not None)
         marks = moved if moved is not None else self._no_marks
+        if not 0.0 <= float(inside_share) < 1.0:
+            raise ValueError(f"inside_share {inside_share!r} is not in [0, 1)")
+        distance = CcdDistance()
+        distance.distance = float(thickness)
+        distance.inside_share = float(inside_share)
         wp.launch(_vertex_face_narrow, dim=lanes_vf,
-                  inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1, float(thickness),
+                  inputs=[self.faces, candidates.vertex_face, positions_t0, positions_t1, distance,
                           self.params, marks, only_moved, candidates.counts, lanes_vf],
                   outputs=[self.vertex_face_toi, self.hit_counts], device=self.device)
         wp.launch(_edge_edge_narrow, dim=lanes_ee,
-                  inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1, float(thickness),
+                  inputs=[self.edges, candidates.edge_edge, positions_t0, positions_t1, distance,
                           self.params, marks, only_moved, candidates.counts, lanes_ee],
                   outputs=[self.edge_edge_toi, self.hit_counts], device=self.device)
 

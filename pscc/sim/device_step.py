@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from pscc.sim.contact_config import CCD_INSIDE_SHARE
 from pscc.tolerances import MAX_COORDINATE
 
 wp.set_module_options({"enable_backward": False})
@@ -439,7 +440,8 @@ class DeviceStep:
         """The body of the CCD / response loop (recorded once, replayed per round)."""
         solver = self.solver
         dev = self.device
-        contacts = solver.detector.narrow_phase_device(x0, x1, solver.ccd_distance, recheck=True)
+        contacts = solver.detector.narrow_phase_device(x0, x1, solver.ccd_distance, recheck=True,
+                                                       inside_share=CCD_INSIDE_SHARE)
         wp.launch(_decide_round, dim=1, inputs=[contacts.hit_counts, solver.contact.projection_rounds],
                   outputs=[self._control, self._running, self._need_broad_phase, self._project, self.report],
                   device=dev)

@@ -40,7 +40,7 @@ from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
 from pscc.errors import InputError, PsccError
 from pscc.geometry.distance import edge_edge_distance, vertex_face_distance
-from pscc.sim.contact_config import ContactConfig
+from pscc.sim.contact_config import CCD_INSIDE_SHARE, ContactConfig
 from pscc.sim.device_step import (
     CANDIDATE_PEAKS,
     CG_FAILED,
@@ -881,7 +881,8 @@ class ClothSolver:
         while True:
             mark = time.perf_counter()
             # After a response, only pairs with a vertex it moved are tested again (exact re-check).
-            result = self.detector.narrow_phase(x0, x1, self.ccd_distance, recheck=True)
+            result = self.detector.narrow_phase(x0, x1, self.ccd_distance, recheck=True,
+                                                inside_share=CCD_INSIDE_SHARE)
             seconds["narrow_phase"] += time.perf_counter() - mark
             counts["ccd_rounds"] += 1
             hits = result.vertex_face.shape[0] + result.edge_edge.shape[0]

@@ -326,14 +326,14 @@ def test_ccd_rechecks_in_the_response_loop_equal_full_ccd() -> None:
     original = detector.narrow_phase
     compared = []
 
-    def checked(x0, x1=None, thickness=0.0, recheck=False):
+    def checked(x0, x1=None, thickness=0.0, recheck=False, inside_share=0.0):
         if x1 is None or not recheck:
-            return original(x0, x1, thickness, recheck=recheck)
-        reusable = detector._last_ccd_thickness == thickness
-        partial = original(x0, x1, thickness, recheck=True)
+            return original(x0, x1, thickness, recheck=recheck, inside_share=inside_share)
+        reusable = detector._last_ccd_thickness == (thickness, inside_share)
+        partial = original(x0, x1, thickness, recheck=True, inside_share=inside_share)
         if reusable:
             compared.append(int(detector.narrow.moved.numpy().sum()))
-        full = original(x0, x1, thickness)
+        full = original(x0, x1, thickness, inside_share=inside_share)
         assert _rows(partial) == _rows(full)
         return full
 
