@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -78,6 +79,11 @@ TRIM_SLACK: int = 1024
 
 class SimulationError(PsccError):
     """A step could not be completed free of intersections even after the allowed step halvings."""
+
+
+class GraphUnavailableWarning(UserWarning):
+    """The device could not record a frame into a graph: every later frame of the run launches eagerly
+    (same results, slower; on CUDA an eager ``wp.capture_while`` synchronizes once per iteration)."""
 
 
 def _finite_in_range(positions: np.ndarray) -> bool:
@@ -764,6 +770,9 @@ class ClothSolver:
                 # E.g. a CUDA driver without conditional graph nodes (CUDA < 12.4): the frame is
                 # recorded with device-side loops, which that driver cannot replay. Run eagerly.
                 self.graph_unavailable = f"{type(error).__name__}: {error}"
+                warnings.warn(f"{self.scene.name}: the frame could not be recorded into a graph on {self.device} "
+                              f"({self.graph_unavailable}); the run goes on with eager launches (stats.json: "
+                              "graph)", GraphUnavailableWarning, stacklevel=2)
                 self._launch_frame(runner, state, scratch, dt, steps)
                 return "eager"
             self._frame_graph = (key, capture.graph)
