@@ -53,9 +53,10 @@ class CcdDistance:
     """The distance a CCD run tests, and what it asks of pairs that start closer than it.
 
     ``inside_share`` = 0: a pair that starts within ``distance`` is a contact at t = 0, as the CCD
-    defines it. ``inside_share`` = s > 0: such a pair (found at t = 0) is tested again at s times its
-    start distance, so it is a contact only if it comes that much closer within the step. End
-    positions cannot undo a contact at t = 0; with s > 0 a response can still keep the pair from
+    defines it. ``inside_share`` = s > 0: a pair the CCD finds at t = 0 (inside the distance, or so
+    near it that the rounding bound cannot tell) is tested again at s times the smaller of its start
+    distance and ``distance``, so it is a contact only if it comes that much closer within the step.
+    End positions cannot undo a contact at t = 0; with s > 0 a response can still keep the pair from
     closing in, and the pair still never crosses.
     """
 
@@ -82,9 +83,9 @@ def _vertex_face_narrow(
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows (``counts[0]``, clamped).
     With ``only_moved``, a pair none of whose vertices is marked in ``moved`` keeps its previous
-    result (its trajectory has not changed). A pair found at t = 0 that starts within the distance is
-    tested again at ``inside_share`` of its start distance (:class:`CcdDistance`). Every valid row with
-    toi <= 1 adds 1 to ``hit_counts[0]``."""
+    result (its trajectory has not changed). A pair found at t = 0 is tested again at ``inside_share`` of
+    its start distance (at most the distance; :class:`CcdDistance`). Every valid row with toi <= 1 adds 1
+    to ``hit_counts[0]``."""
     for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         v = pair[0]
@@ -106,12 +107,11 @@ def _vertex_face_narrow(
             if toi <= 0.0 and distance.inside_share > 0.0:
                 start = wp.sqrt(vertex_face_distance_squared(positions_t0[v], positions_t0[f[0]],
                                                              positions_t0[f[1]], positions_t0[f[2]]))
-                if start < distance.distance:
-                    toi = vertex_face_ccd_toi(
-                        positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
-                        positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
-                        distance.inside_share * start, 0.0, params,
-                    )
+                toi = vertex_face_ccd_toi(
+                    positions_t0[v], positions_t0[f[0]], positions_t0[f[1]], positions_t0[f[2]],
+                    positions_t1[v], positions_t1[f[0]], positions_t1[f[1]], positions_t1[f[2]],
+                    distance.inside_share * wp.min(start, distance.distance), 0.0, params,
+                )
             toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 0, 1)
@@ -157,12 +157,11 @@ def _edge_edge_narrow(
             if toi <= 0.0 and distance.inside_share > 0.0:
                 start = wp.sqrt(edge_edge_distance_squared(positions_t0[a[0]], positions_t0[a[1]],
                                                            positions_t0[b[0]], positions_t0[b[1]]))
-                if start < distance.distance:
-                    toi = edge_edge_ccd_toi(
-                        positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
-                        positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
-                        distance.inside_share * start, 0.0, params,
-                    )
+                toi = edge_edge_ccd_toi(
+                    positions_t0[a[0]], positions_t0[a[1]], positions_t0[b[0]], positions_t0[b[1]],
+                    positions_t1[a[0]], positions_t1[a[1]], positions_t1[b[0]], positions_t1[b[1]],
+                    distance.inside_share * wp.min(start, distance.distance), 0.0, params,
+                )
             toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 1, 1)
