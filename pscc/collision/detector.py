@@ -527,9 +527,10 @@ class CollisionDetector:
         times of impact and hit counts (:meth:`NarrowPhase.run_device`; the proximity springs do, to find
         each pair's closest points once).
 
-        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair that starts within ``thickness`` is a
-        contact only if it comes within s times its start distance (:class:`NarrowPhase`'s
-        ``run_device``). A re-check keeps the same value.
+        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair found at t = 0 (within ``thickness``, or
+        too near it for the rounding bound) is a contact only if it comes within s times the smaller
+        of its start distance and ``thickness`` (:class:`pscc.collision.narrow_phase.CcdDistance`). A
+        re-check keeps the same value.
 
         Returns:
             The :class:`DeviceContacts` view of the candidate rows, their times of impact and
@@ -585,8 +586,8 @@ class CollisionDetector:
         previous result, which is exact because their trajectories are unchanged. Otherwise
         everything is tested.
 
-        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair that starts within ``thickness`` is a
-        contact only if it comes within s times its start distance (see :meth:`narrow_phase_device`).
+        ``inside_share`` (CCD only): 0, or s in (0, 1): a pair found at t = 0 is a contact only if it
+        comes within s times its start distance (see :meth:`narrow_phase_device`).
 
         Raises:
             InputError: no broad phase has run, CCD after a discrete broad phase, a thickness

@@ -423,9 +423,9 @@ class NarrowPhase:
                 :meth:`pscc.sim.proximity.ProximityContacts.test_and_update_device`) writes the times of
                 impact and the hit counts, bit for bit as this method would.
             inside_share: CCD only: 0 (a pair that starts within ``thickness`` is a contact at t = 0),
-                or s in (0, 1): such a pair is a contact only if it comes within s times its start
-                distance (:class:`CcdDistance`; the simulator's response loop, which cannot undo a
-                contact at t = 0).
+                or s in (0, 1): a pair found at t = 0 is a contact only if it comes within s times the
+                smaller of its start distance and ``thickness`` (:class:`CcdDistance`; the simulator's
+                response loop, which cannot undo a contact at t = 0).
 
         Raises:
             ValueError: the toi buffers are shorter than the candidate buffers (call :meth:`reserve`).

@@ -9,14 +9,16 @@ from pscc.collision.detector import METHODS
 from pscc.errors import InputError
 
 CCD_INSIDE_SHARE: float = 0.5
-"""The response loop's CCD on a pair that starts closer than the CCD distance: a contact only if the pair
-comes within this share of its start distance during the step (``inside_share`` of
+"""The response loop's CCD on a pair it finds at t = 0 (closer than the CCD distance, or so near it that the
+rounding bound cannot tell): a contact only if the pair comes within this share of its start distance (at
+most this share of the CCD distance) during the step (``inside_share`` of
 :meth:`CollisionDetector.narrow_phase`). At 0, the CCD reports such a pair at t = 0 in every round, which
 no end position can undo, so the step fails. Two ways in: a scene that starts with layers closer than the
 CCD distance (0.1 mm apart at h = 2 mm failed its first step), and a step that ends with a pair inside it.
 The culling certifies no intersection, not the CCD distance: on `twisting` at scale 0.026 a step ended with
 a vertex 0.86 of the distance from the face across a nearly closed hinge (a pair that brute force reports
-at that distance and pscc's culling does not), and the next step stopped the run at t = 3.20 s."""
+at that distance and pscc's culling does not), and the next step stopped the run at t = 3.20 s. In the
+96-triangle `twist` strip an edge pair resting at 1.003 of the distance stopped the run at t = 5.14 s."""
 
 
 @dataclass(frozen=True)

@@ -81,3 +81,32 @@ def test_the_share_must_be_below_one() -> None:
     detector.broad_phase(x0, x1, D)
     with pytest.raises(InputError, match="inside_share"):
         detector.narrow_phase(x0, x1, D, inside_share=1.0)
+
+
+# An edge pair of the 96-triangle `twist` strip at t = 5.14 s (float32 positions of its four vertices at the
+# step's start and end), resting at 1.003 times the CCD distance 0.2 mm: too near it for the rounding bound,
+# so the CCD reports it at t = 0, and the run used to stop there.
+TWIST_T0 = [[-0.1414732187986374, 0.007496476173400879, -0.09766870737075806],
+            [-0.23109640181064606, 0.025673028081655502, -0.04309796541929245],
+            [-0.21721383929252625, -0.059681911021471024, -0.0051807318814098835],
+            [-0.18463318049907684, 0.016562651842832565, -0.07183809578418732]]
+TWIST_T1 = [[-0.14162281155586243, 0.007573517970740795, -0.0977981761097908],
+            [-0.2312677502632141, 0.025762086734175682, -0.04326716065406799],
+            [-0.21730206906795502, -0.05950815603137016, -0.005189700052142143],
+            [-0.18479353189468384, 0.016644641757011414, -0.07198727875947952]]
+
+
+def test_a_pair_resting_just_outside_the_distance_is_not_held_at_t_zero() -> None:
+    def mesh(points: list[list[float]]) -> np.ndarray:
+        a0, a1, b0, b1 = np.asarray(points, np.float32)
+        return np.array([a0, a1, a0 + [0.0, 0.0, -0.5], b0, b1, b0 + [0.0, 0.0, 0.5]], np.float32)
+
+    faces = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    x0, x1 = mesh(TWIST_T0), mesh(TWIST_T1)
+    results = []
+    for share in (0.0, 0.5):
+        detector = CollisionDetector(faces, method="brute-force", device="cpu")
+        detector.broad_phase(x0, x1, 0.0002)
+        results.append(detector.narrow_phase(x0, x1, 0.0002, inside_share=share))
+    assert results[0].edge_edge.tolist() == [[0, 1, 3, 4]] and results[0].edge_edge_toi.tolist() == [0.0]
+    assert results[1].edge_edge.shape[0] == 0 and results[1].vertex_face.shape[0] == 0
