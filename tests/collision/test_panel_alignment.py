@@ -45,9 +45,9 @@ def test_the_bvh_of_a_turned_grid_is_as_testable_as_the_axis_aligned_one(degrees
     turned = full_check(faces, _turned(rest.astype(np.float64), degrees).astype(np.float32))
     assert np.all(straight.testable) and np.all(turned.testable)
     # The same cuts: nodes of the same sizes at every depth.
-    for bvh in (straight, turned):
-        bvh.sizes = sorted(zip(bvh.depth.tolist(), (bvh.face_end - bvh.face_begin).tolist(), strict=True))
-    assert straight.sizes == turned.sizes
+    sizes = [sorted(zip(bvh.depth.tolist(), (bvh.face_end - bvh.face_begin).tolist(), strict=True))
+             for bvh in (straight, turned)]
+    assert sizes[0] == sizes[1]
 
 
 def test_a_grid_on_the_axes_and_an_irregular_mesh_keep_their_coordinates_bit_for_bit() -> None:
