@@ -197,6 +197,7 @@ class ProximityParameters:
 
     distance_error: wp.float32  # C x EPS32: |d_float32 - d_exact| <= distance_error x L (well-shaped)
     well_shaped_flatness: wp.float32  # smallest |ab x ac|^2 / max_edge^4 the bound covers
+    thin_overestimate: wp.float32  # bound / L on how much the closed form overestimates on a thin face
 
 
 def proximity_parameters() -> ProximityParameters:
@@ -204,6 +205,7 @@ def proximity_parameters() -> ProximityParameters:
     params = ProximityParameters()
     params.distance_error = 2.0 * distance_tolerances.DISTANCE_ERROR_CONST * 2.0**-23
     params.well_shaped_flatness = distance_tolerances.WELL_SHAPED_MIN_FLATNESS
+    params.thin_overestimate = 2.0 * distance_tolerances.ILL_CONDITIONED_REL_ERROR
     return params
 
 
@@ -231,17 +233,31 @@ def vertex_face_proximity_toi(
     proximity: ProximityParameters,
 ) -> float:
     """0 when vertex p may be within ``thickness`` of triangle (a, b, c), else ``NO_HIT``: closed-form
-    distance for well-shaped faces (``w``: the closest point's barycentric weights,
-    :func:`pscc.geometry.distance.vertex_face_closest_point`), else the search."""
+    distance (``w``: the closest point's barycentric weights,
+    :func:`pscc.geometry.distance.vertex_face_closest_point`) for well-shaped faces; for nearly flat
+    ones too, except in a narrow band past the thickness, where the search decides.
+
+    On a nearly flat face the closed form is still never below the exact distance by more than the
+    rounding bound (its weights are a convex combination), so a pair it puts within the thickness
+    is a contact as on a well-shaped face; it may overestimate by at most
+    ``thin_overestimate x L`` (``ILL_CONDITIONED_REL_ERROR``, doubled), so a pair beyond the
+    thickness by more than that is not. Only pairs in between run the exact-safe inclusion search."""
     ab = b - a
     ac = c - a
     n = wp.cross(ab, ac)
     longest = wp.max(wp.max(wp.dot(ab, ab), wp.dot(ac, ac)), wp.dot(c - b, c - b))
     area_sq = wp.dot(n, n)
+    scale = _local_scale(a, b, c, p)
+    error = proximity.distance_error * scale
+    distance_sq = vertex_face_distance_squared_at(p, a, b, c, w)
     if area_sq == 0.0 or area_sq >= proximity.well_shaped_flatness * longest * longest:
-        error = proximity.distance_error * _local_scale(a, b, c, p)
-        return _within(vertex_face_distance_squared_at(p, a, b, c, w), thickness, error)
-    # Nearly flat triangle: the closed form may overestimate; the inclusion search is exact-safe.
+        return _within(distance_sq, thickness, error)
+    # Nearly flat triangle: the closed form may overestimate, by at most thin_overestimate x L.
+    distance = wp.sqrt(distance_sq)
+    if distance <= thickness + error:
+        return 0.0
+    if distance > thickness + error + proximity.thin_overestimate * scale:
+        return 2.0
     return vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
 
 
