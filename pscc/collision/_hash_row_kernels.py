@@ -402,21 +402,33 @@ def _write_rows(
 
 @wp.func
 def cell_fraction_code(t: float, cell: int) -> wp.uint32:
-    """The sixteenth of cell ``cell`` (one axis) that holds the grid coordinate ``t`` ((p - origin) times
-    1 / cell_size), clamped to [0, 15]. Non-decreasing in t for a fixed cell: a float32 subtraction of a
-    constant, the exact scaling by 16, floor and clamp are all monotone, so two entries of one cell
-    whose float32 intervals overlap get codes that overlap."""
-    q = wp.floor((t - float(cell)) * 16.0)
-    return wp.uint32(int(wp.clamp(q, 0.0, 15.0)))
+    """1 + the fifteenth of cell ``cell`` (one axis) that holds the grid coordinate ``t`` ((p - origin)
+    times 1 / cell_size), clamped to [1, 15]. Non-decreasing in t for a fixed cell: a float32
+    subtraction of a constant, a float32 product with the positive constant 15, floor and clamp are all
+    monotone, so two entries of one cell whose float32 intervals overlap get codes that overlap."""
+    q = wp.floor((t - float(cell)) * 15.0)
+    return wp.uint32(int(wp.clamp(q + 1.0, 1.0, 15.0)))
+
+
+@wp.func
+def lower_end_code(lower_cell: int, t: float, cell: int) -> wp.uint32:
+    """The code of a box's lower end on one axis in cell ``cell``: 0 when the box starts in an earlier
+    cell (``lower_cell``, from :func:`cell_of_point`, below ``cell``), else ``cell_fraction_code``.
+    0 is below every code of an end inside the cell, so the order of ends is kept."""
+    if lower_cell < cell:
+        return wp.uint32(0)
+    return cell_fraction_code(t, cell)
 
 
 @wp.func
 def entry_cell_code(
     key: wp.int64, node_bits: int, lower: wp.vec3, upper: wp.vec3, state: GridState
 ) -> wp.uint32:
-    """The box [lower, upper] inside the cell of entry key ``key``: each end of each axis as a sixteenth
-    of the cell (``cell_fraction_code``), packed as 5-bit fields: upper x, y, z in bits 0-14, lower x,
-    y, z in bits 15-29 (bit 4 of every field clear: the guard of the test pass's packed comparison)."""
+    """The box [lower, upper] inside the cell of entry key ``key``: each end of each axis as a fifteenth
+    of the cell (``cell_fraction_code``, 1-15), a lower end in an earlier cell as 0 (``lower_end_code``),
+    packed as 5-bit fields: upper x, y, z in bits 0-14, lower x, y, z in bits 15-29 (bit 4 of every field
+    clear: the guard of the test pass's packed comparison). A lower field is non-zero exactly when the box
+    starts in this cell on that axis, which decides the token rule (``codes_hold_token``)."""
     cell = int(key_cell(key, node_bits))  # < 2^31 (MAX_GRID_CELLS)
     nz = state.dims[2]
     ny = state.dims[1]
@@ -427,12 +439,13 @@ def entry_cell_code(
     scale = 1.0 / state.cell_size
     lo = (lower - state.origin) * scale
     hi = (upper - state.origin) * scale
+    first = cell_of_point(lower, state.origin, state.cell_size)
     code = cell_fraction_code(hi[0], cx)
     code = code | (cell_fraction_code(hi[1], cy) << wp.uint32(5))
     code = code | (cell_fraction_code(hi[2], cz) << wp.uint32(10))
-    code = code | (cell_fraction_code(lo[0], cx) << wp.uint32(15))
-    code = code | (cell_fraction_code(lo[1], cy) << wp.uint32(20))
-    return code | (cell_fraction_code(lo[2], cz) << wp.uint32(25))
+    code = code | (lower_end_code(first[0], lo[0], cx) << wp.uint32(15))
+    code = code | (lower_end_code(first[1], lo[1], cy) << wp.uint32(20))
+    return code | (lower_end_code(first[2], lo[2], cz) << wp.uint32(25))
 
 
 CODE_UPPER_BITS = wp.constant(wp.uint32(0x7FFF))
@@ -461,6 +474,23 @@ def cell_codes_overlap(minuend_a: wp.uint32, subtrahend_a: wp.uint32, code_b: wp
     monotone)."""
     difference = ((code_b & CODE_UPPER_BITS) | minuend_a) - (subtrahend_a | (code_b & CODE_LOWER_BITS))
     return (difference & CODE_GUARDS) == CODE_GUARDS
+
+
+CODE_LOWER_X = wp.constant(wp.uint32(0xF << 15))
+CODE_LOWER_Y = wp.constant(wp.uint32(0xF << 20))
+CODE_LOWER_Z = wp.constant(wp.uint32(0xF << 25))
+
+
+@wp.func
+def codes_hold_token(code_a: wp.uint32, code_b: wp.uint32) -> bool:
+    """The token rule on the codes of two entries of one cell: the cell holds the lower corner of the
+    boxes' intersection, max(lower_a, lower_b), exactly when on every axis one of the boxes starts in
+    it (a non-zero lower field). Equal to the test on the boxes: :func:`cell_of_point` is monotone per
+    axis, so the corner's cell is the larger of the two lower ends' cells, and neither is past the
+    cell (both boxes were inserted into it)."""
+    either = code_a | code_b
+    return (either & CODE_LOWER_X) != wp.uint32(0) and (either & CODE_LOWER_Y) != wp.uint32(0) and (
+        either & CODE_LOWER_Z) != wp.uint32(0)
 
 
 @wp.kernel
@@ -576,7 +606,9 @@ def _test_bounding_volumes(
         # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
         emit = True
         if use_codes:
-            emit = cell_codes_overlap(minuend_a, subtrahend_a, entry_code[entry_b])
+            # The codes decide the token rule exactly, and reject most pairs before any box is loaded.
+            code_b = entry_code[entry_b]
+            emit = cell_codes_overlap(minuend_a, subtrahend_a, code_b) and codes_hold_token(code_a, code_b)
         fa = int(0)
         fb = int(0)
         lower_a = wp.vec3()
@@ -587,7 +619,7 @@ def _test_bounding_volumes(
             lower_a = face_lower[fa]
             lower_b = face_lower[fb]
             emit = boxes_overlap(lower_a, face_upper[fa], lower_b, face_upper[fb])
-        if emit:
+        if emit and not use_codes:
             # Token position: only the cell holding the lower corner of the boxes' intersection emits.
             token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
             emit = linear_cell_id(token, state.dims) == row_cell

@@ -15,8 +15,9 @@ rounding bound. Groups that miss each other hold no pair of faces closer than th
 face pairs are skipped. Every remaining pair of entries of a cell is one bounding-volume (BV) test,
 run by one thread, found through *work rows* (a group against a run of later groups of its cell);
 a token-position rule emits each overlapping face pair from exactly one cell. Calls with many BV
-tests per entry first compare 4-byte *cell codes* (each box end as a sixteenth of the cell, packed so
-that one subtraction compares all six ends) and load the boxes only where they overlap. See
+tests per entry first compare 4-byte *cell codes* (each box end as a fifteenth of the cell, a lower end
+in an earlier cell as 0, packed so that one subtraction compares all six ends; the lower fields also
+decide the token rule) and load the boxes only where they overlap and the cell holds the token. See
 ``docs/spatial-hash.md`` for the derivations.
 
 Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, R = work rows, P = pairs;
@@ -38,7 +39,7 @@ group_start / group_end    (E,) / (G,) int32     entry range of group g (triangl
                                                  group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
-entry_code                 (E,) uint32           cell code of each sorted entry: its box ends as sixteenths
+entry_code                 (E,) uint32           cell code of each sorted entry: its box ends as fifteenths
                                                  of its cell (written only when the call uses the codes)
 group_axis / group_slab    (S,) vec3 / vec2      slab test only: axis of group g / (min, max) of its
                                                  faces' vertices on the axis (1 slot when off); S, the
@@ -166,7 +167,7 @@ class SpatialHash:
             distance, a subset of the box pairs.
         slab_min_work: slab-test two groups only when they would need this many face tests.
         cell_code_min_tests: a call whose test pass runs at least this many BV tests per entry first
-            compares the entries' 4-byte cell codes (each box end as a sixteenth of the cell, read in
+            compares the entries' 4-byte cell codes (each box end as a fifteenth of the cell, read in
             entry order) and loads the boxes only where the codes overlap; the pairs are the same
             either way (the codes never reject overlapping boxes). 0: always; 2^31: never. The
             choice is made on the device, so a recorded graph makes it anew on every replay.

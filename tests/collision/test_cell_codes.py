@@ -1,7 +1,8 @@
-"""The spatial hash's cell codes (pscc.collision._hash_row_kernels): each entry's box ends as sixteenths
-of its cell, compared with one packed subtraction before the boxes are loaded. The codes never reject a
-pair whose float32 boxes overlap (random, touching, point and far-off boxes, any cell), they do reject
-boxes apart by more than a sixteenth inside the cell, and the hash and the detector give the same pairs
+"""The spatial hash's cell codes (pscc.collision._hash_row_kernels): each entry's box ends as fifteenths
+of its cell (a lower end in an earlier cell as 0), compared with one packed subtraction before the boxes
+are loaded. The codes never reject a pair whose float32 boxes overlap (random, touching, point and far-off
+boxes, any cell), they decide the token rule exactly as the boxes do, they do reject boxes apart by
+more than a fifteenth inside the cell, and the hash and the detector give the same pairs
 with the codes always on, on the default choice and never on."""
 
 from __future__ import annotations
@@ -12,8 +13,14 @@ import warp as wp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pscc.collision._hash_row_kernels import cell_codes_overlap, code_minuend, code_subtrahend, entry_cell_code
-from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, GridState
+from pscc.collision._hash_row_kernels import (
+    cell_codes_overlap,
+    code_minuend,
+    code_subtrahend,
+    codes_hold_token,
+    entry_cell_code,
+)
+from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, GridState, cell_of_point
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.spatial_hash import CELL_CODE_MIN_TESTS, SpatialHash
 from pscc.errors import InputError
@@ -45,6 +52,38 @@ def _codes_overlap(
     ab = cell_codes_overlap(code_minuend(code_a), code_subtrahend(code_a), code_b)
     ba = cell_codes_overlap(code_minuend(code_b), code_subtrahend(code_b), code_a)
     out[i] = int(ab) + 2 * int(ba)
+
+
+@wp.kernel
+def _token_rules(
+    cells: wp.array(dtype=wp.vec3i),
+    lower_a: wp.array(dtype=wp.vec3),
+    upper_a: wp.array(dtype=wp.vec3),
+    lower_b: wp.array(dtype=wp.vec3),
+    upper_b: wp.array(dtype=wp.vec3),
+    grid: wp.array(dtype=GridState),
+    out: wp.array(dtype=wp.int32),
+):
+    """Bit 0: both boxes span the sample's cell (they would be entries of it); bit 1: the cell holds
+    the token by the boxes (the cell of max(lower_a, lower_b)); bit 2: by the codes."""
+    i = wp.tid()
+    state = grid[0]
+    c = cells[i]
+    cell = (wp.int64(c[0]) * wp.int64(state.dims[1]) + wp.int64(c[1])) * wp.int64(state.dims[2]) + wp.int64(c[2])
+    key = (cell << wp.int64(NODE_BITS)) | wp.int64(i % 32)
+    first_a = cell_of_point(lower_a[i], state.origin, state.cell_size)
+    last_a = cell_of_point(upper_a[i], state.origin, state.cell_size)
+    first_b = cell_of_point(lower_b[i], state.origin, state.cell_size)
+    last_b = cell_of_point(upper_b[i], state.origin, state.cell_size)
+    spans = int(1)
+    for k in range(3):
+        if first_a[k] > c[k] or last_a[k] < c[k] or first_b[k] > c[k] or last_b[k] < c[k]:
+            spans = 0
+    token = cell_of_point(wp.max(lower_a[i], lower_b[i]), state.origin, state.cell_size)
+    by_boxes = int(token[0] == c[0] and token[1] == c[1] and token[2] == c[2])
+    code_a = entry_cell_code(key, int(NODE_BITS), lower_a[i], upper_a[i], state)
+    code_b = entry_cell_code(key, int(NODE_BITS), lower_b[i], upper_b[i], state)
+    out[i] = spans + 2 * by_boxes + 4 * int(codes_hold_token(code_a, code_b))
 
 
 def _grid(origin: np.ndarray, cell_size: float, dims: tuple[int, int, int]) -> wp.array:
@@ -105,6 +144,41 @@ def test_codes_never_reject_overlapping_boxes(seed: int, offset: float, cell_siz
     # Both orders give the same answer.
     assert np.all((got == 0) | (got == 3))
     assert overlap.sum() > 200
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), offset=st.sampled_from([0.0, 3.0, -250.0, 1e5]),
+       cell_size=st.sampled_from([1.0, 0.37, 1e-3, 40.0]))
+def test_codes_hold_the_token_exactly_where_the_boxes_do(seed: int, offset: float, cell_size: float) -> None:
+    """For two boxes that are both entries of a cell, the token rule on their codes (a non-zero lower
+    field on every axis in code_a | code_b) is the token rule on the boxes, also for ends on cell
+    faces and far from the origin."""
+    rng = np.random.default_rng(seed)
+    n = 4000
+    origin = np.float32(offset) + rng.normal(size=3).astype(np.float32)
+    cells = rng.integers(1, 6, size=(n, 3))
+    base = origin + cells * np.float32(cell_size)
+    def ends() -> np.ndarray:
+        kind = rng.integers(0, 3, size=(n, 3))
+        free = rng.uniform(-1.5, 2.5, size=(n, 3))
+        face = rng.integers(-1, 3, size=(n, 3)).astype(np.float64)
+        near_face = face + rng.choice([-1.0, 1.0], size=(n, 3)) * 1e-7
+        return (base + np.where(kind == 0, free, np.where(kind == 1, face, near_face)) * cell_size).astype(np.float32)
+    p, q, r, s = ends(), ends(), ends(), ends()
+    la, ua = np.minimum(p, q), np.maximum(p, q)
+    lb, ub = np.minimum(r, s), np.maximum(r, s)
+    out = wp.zeros(n, dtype=wp.int32, device=DEVICE)
+    arrays = [wp.array(v, dtype=wp.vec3, device=DEVICE) for v in (la, ua, lb, ub)]
+    wp.launch(_token_rules, dim=n, device=DEVICE,
+              inputs=[wp.array(cells.astype(np.int32), dtype=wp.vec3i, device=DEVICE), *arrays,
+                      _grid(origin, cell_size, (8, 8, 8))], outputs=[out])
+    got = out.numpy()
+    entries = (got & 1) == 1
+    by_boxes = (got >> 1) & 1
+    by_codes = (got >> 2) & 1
+    if abs(offset) * 2.0**-23 < cell_size / 64:  # float32 resolves the cell (not 1e-3 cells at 1e5)
+        assert entries.sum() > 100 and by_boxes[entries].sum() > 20 and (1 - by_boxes[entries]).sum() > 20
+    np.testing.assert_array_equal(by_codes[entries], by_boxes[entries])
 
 
 def test_codes_reject_boxes_apart_within_the_cell() -> None:
