@@ -406,46 +406,41 @@ def _finish_sprout(
 
 
 @wp.kernel
-def _write_sort_keys(
+def _clear_range_marks(
+    # out:
+    marks: wp.array(dtype=wp.int32),
+):
+    """One thread per face position (and the one past the end): zero."""
+    marks[wp.tid()] = 0
+
+
+@wp.kernel
+def _mark_front_ranges(
     # in:
     bvh: MaterialBvhArrays,
     front: wp.array(dtype=wp.int32),
     front_count: wp.array(dtype=wp.int32),
-    pad_key: int,
     # out:
-    keys_out: wp.array(dtype=wp.int32),
-    values_out: wp.array(dtype=wp.int32),
+    marks: wp.array(dtype=wp.int32),
 ):
-    """One thread per front slot (capacity N): sort key = the node's first face position; slots past
-    the front get ``pad_key`` (larger than every face position), so they sort last."""
+    """One thread per front slot (capacity N): a front node adds node + 1 at its first face position and
+    subtracts it at the position past its last. The front's face ranges partition the leaf order, so
+    the inclusive prefix sum at a face position is exactly (its node) + 1."""
     i = wp.tid()
     if i < front_count[0]:
         node = front[i]
-        keys_out[i] = bvh.face_begin[node]
-        values_out[i] = node
-    else:
-        keys_out[i] = pad_key
-        values_out[i] = -1
+        wp.atomic_add(marks, bvh.face_begin[node], node + 1)
+        wp.atomic_add(marks, bvh.face_end[node], -(node + 1))
 
 
 @wp.kernel
 def _assign_node_ids(
     # in:
     bvh: MaterialBvhArrays,
-    sorted_begins: wp.array(dtype=wp.int32),
-    sorted_nodes: wp.array(dtype=wp.int32),
-    front_count: wp.array(dtype=wp.int32),
+    range_owner: wp.array(dtype=wp.int32),
     # out:
     node_id_out: wp.array(dtype=wp.int32),
 ):
-    """One thread per face position: the last front node starting at or before it owns it."""
+    """One thread per face position k: the front node owning it (the prefix sum of the range marks, less 1)."""
     k = wp.tid()
-    lo = int(0)
-    hi = front_count[0] - 1
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        if sorted_begins[mid] <= k:
-            lo = mid
-        else:
-            hi = mid - 1
-    node_id_out[bvh.face_order[k]] = sorted_nodes[lo]
+    node_id_out[bvh.face_order[k]] = range_owner[k] - 1

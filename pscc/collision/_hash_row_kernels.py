@@ -554,7 +554,8 @@ def _test_bounding_volumes(
     ``diagonals.enabled`` a test is of the faces' 26-DOPs: the boxes, then (only for boxes that overlap
     in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
     the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
-    order); the codes never reject a pair whose boxes overlap. A pair of faces that share a vertex is
+    order, in a tight scan) and hold the token (``codes_hold_token``, which then replaces the token test
+    on the boxes); the codes never reject a pair whose boxes overlap and whose cell emits it. A pair of faces that share a vertex is
     dropped with ``shared.mode`` skip (before the diagonals), or with certify, after every other test,
     when its two faces are certified (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
     total = info[_LIVE_TESTS]
@@ -603,58 +604,62 @@ def _test_bounding_volumes(
     minuend_a = code_minuend(code_a)
     subtrahend_a = code_subtrahend(code_a)
     while k < end_test:
-        # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
-        emit = True
-        if use_codes:
-            # The codes decide the token rule exactly, and reject most pairs before any box is loaded.
-            code_b = entry_code[entry_b]
-            emit = cell_codes_overlap(minuend_a, subtrahend_a, code_b) and codes_hold_token(code_a, code_b)
-        fa = int(0)
-        fb = int(0)
-        lower_a = wp.vec3()
-        lower_b = wp.vec3()
-        if emit:
+        # The tests of entry a against entries [entry_b, segment_end) of its row (the chunk may end first).
+        segment_end = b_end
+        if wp.int64(b_end - entry_b) > end_test - k:
+            segment_end = entry_b + int(end_test - k)
+        k += wp.int64(segment_end - entry_b)
+        while entry_b < segment_end:
+            # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
+            if use_codes:
+                # The codes decide the token rule exactly and reject most pairs: skip those in a tight scan.
+                while entry_b < segment_end:
+                    code_b = entry_code[entry_b]
+                    if cell_codes_overlap(minuend_a, subtrahend_a, code_b):
+                        if codes_hold_token(code_a, code_b):
+                            break
+                    entry_b += 1
+                if entry_b == segment_end:
+                    break
             fa = entry_face[entry_a]
             fb = entry_face[entry_b]
             lower_a = face_lower[fa]
             lower_b = face_lower[fb]
             emit = boxes_overlap(lower_a, face_upper[fa], lower_b, face_upper[fb])
-        if emit and not use_codes:
-            # Token position: only the cell holding the lower corner of the boxes' intersection emits.
-            token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
-            emit = linear_cell_id(token, state.dims) == row_cell
-        if emit and shared_mode == SHARED_SKIP:
-            emit = not shares_vertex(faces[fa], faces[fb])
-        if emit and use_diagonals != 0:
-            emit = diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa],
-                                          diagonal_lower[fb], diagonal_upper[fb])
-        if emit and shared_mode == SHARED_CERTIFY:
-            ta = faces[fa]
-            tb = faces[fb]
-            if shares_vertex(ta, tb):
-                emit = not certified_in(shared_x0, shared_x1, shared_swept, shared_margin, ta, tb)
-        if emit:
-            slot = wp.atomic_add(counts, 0, wp.int64(1))
-            if slot < capacity:
-                pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
-        k += wp.int64(1)
-        entry_b += 1
-        if entry_b == b_end:
+            if emit and not use_codes:
+                # Token position: only the cell holding the lower corner of the boxes' intersection emits.
+                token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
+                emit = linear_cell_id(token, state.dims) == row_cell
+            if emit and shared_mode == SHARED_SKIP:
+                emit = not shares_vertex(faces[fa], faces[fb])
+            if emit and use_diagonals != 0:
+                emit = diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa],
+                                              diagonal_lower[fb], diagonal_upper[fb])
+            if emit and shared_mode == SHARED_CERTIFY:
+                ta = faces[fa]
+                tb = faces[fb]
+                if shares_vertex(ta, tb):
+                    emit = not certified_in(shared_x0, shared_x1, shared_swept, shared_margin, ta, tb)
+            if emit:
+                slot = wp.atomic_add(counts, 0, wp.int64(1))
+                if slot < capacity:
+                    pairs[int(slot)] = wp.vec2i(wp.min(fa, fb), wp.max(fa, fb))
+            entry_b += 1
+        if k >= end_test:
+            break
+        entry_b = b_start
+        entry_a += 1
+        if entry_a == last_a:
+            r += 1
+            span = row_span[r]
+            g = span[0]
+            b_start = span[1]
+            b_end = span[2]
+            entry_a = group_starts[g]
             entry_b = b_start
-            entry_a += 1
-            if entry_a == last_a:
-                if k >= end_test:
-                    break
-                r += 1
-                span = row_span[r]
-                g = span[0]
-                b_start = span[1]
-                b_end = span[2]
-                entry_a = group_starts[g]
-                entry_b = b_start
-                last_a = group_ends[g]
-                row_cell = key_cell(entry_key[entry_a], node_bits)
-            if use_codes:
-                code_a = entry_code[entry_a]
-                minuend_a = code_minuend(code_a)
-                subtrahend_a = code_subtrahend(code_a)
+            last_a = group_ends[g]
+            row_cell = key_cell(entry_key[entry_a], node_bits)
+        if use_codes:
+            code_a = entry_code[entry_a]
+            minuend_a = code_minuend(code_a)
+            subtrahend_a = code_subtrahend(code_a)

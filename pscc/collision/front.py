@@ -17,7 +17,9 @@ Every :meth:`NormalConeFront.update` call (temporal coherence: the front persist
    failing nodes are replaced by their children, which are tested in turn, until every node of the
    new front passes or is a leaf. Compaction uses exclusive scans, so the front's order is
    deterministic.
-4. **Node ids**: the front sorted by ``face_begin``; one thread per face position binary-searches it.
+4. **Node ids**: every front node adds node + 1 at its first face position (in the BVH's leaf order)
+   and subtracts it past its last; the front's face ranges partition the leaf order, so the
+   inclusive prefix sum at a face position is its node + 1. No sort: O(front + faces).
 
 The call stays on the device: sizes live in (1,) device arrays, every kernel is launched at
 capacity (N threads, each returning early past the device count), and the shrink and sprout loops
@@ -37,8 +39,8 @@ in_front, marked          (N + 1,) int32 x 2    1 for front nodes during / at th
                                                 shrink round
 counters                  (4,) int32            last call: nodes tested, sprout levels, shrink
                                                 rounds, new front size while sprouting
-scratch                   (N,) / (N + 1,) int32 frontiers, flags, scan offsets; (2N,) sort
-                                                keys and values
+scratch                   (N,) / (N + 1,) int32 frontiers, flags, scan offsets; (m + 1,)
+                                                int32 x 2 face-range marks and their sums
 ========================  ====================  ===========================================
 
 The front never holds more than N nodes (the paper's bound is 2m + 1), nor does a frontier (its
@@ -61,18 +63,19 @@ from pscc.collision._front_kernels import (
     _assign_node_ids,
     _begin_update,
     _clear_flags,
+    _clear_range_marks,
     _compact_flags,
     _copy_nodes,
     _finish_shrink_round,
     _finish_sprout,
     _mark_front,
+    _mark_front_ranges,
     _refit_all_in_order,
     _refit_level,
     _scatter_frontier,
     _shrink_pairs,
     _start_sprout,
     _test_frontier,
-    _write_sort_keys,
 )
 from pscc.collision.bvh import MaterialBvh
 from pscc.collision.scratch import TableSpec, place_tables, scratch_lenders
@@ -112,10 +115,11 @@ class NormalConeFront:
         n = bvh.node_count
         self.front = wp.zeros(n, dtype=wp.int32, device=device)
         self.front_count = wp.zeros(1, dtype=wp.int32, device=device)
-        self._scan = PrefixSum(device, n)  # allocation-free inside the shrink and sprout loops on CUDA
+        # Allocation-free inside the shrink and sprout loops on CUDA; also scans the face-range marks.
+        self._scan = PrefixSum(device, max(n + 1, bvh.face_count + 1))
         self.calls = wp.zeros(1, dtype=wp.int64, device=device)
         self._frontier_count = wp.zeros(1, dtype=wp.int32, device=device)
-        # The per-call tables (node masks and normals, frontiers, flags, scans, sort buffers): in lent
+        # The per-call tables (node masks and normals, frontiers, flags, scans, range marks): in lent
         # memory when lend_scratch() gives some, else buffers of their own.
         self._scratch_source: Callable[[], Sequence[wp.array]] | None = None
         self._scratch_key: tuple[tuple[int, int], ...] = ()
@@ -123,7 +127,6 @@ class NormalConeFront:
         self._last_positions: tuple[wp.array, wp.array | None] | None = None
         self._lent_names: set[str] = set()
         self._place_scratch()
-        self._sort_bits = max(1, int(bvh.face_count).bit_length())
         self._lifted = wp.zeros(1, dtype=wp.int32, device=device)
         self._counters = wp.zeros(4, dtype=wp.int32, device=device)
         self.node_id = wp.zeros(bvh.face_count, dtype=wp.int32, device=device)
@@ -150,7 +153,7 @@ class NormalConeFront:
 
     def lend_scratch(self, source: Callable[[], Sequence[wp.array]] | None) -> None:
         """Let the per-call tables (:meth:`_scratch_tables`: node masks and normals, frontiers, flags,
-        scans and the sort buffers, which :meth:`update` fills before it reads them) live in the buffers
+        scans and the face-range marks, which :meth:`update` fills before it reads them) live in the buffers
         ``source()`` gives, where they fit (:func:`pscc.collision.scratch.place_tables`); the front, its
         counters and :attr:`node_id` keep buffers of their own.
 
@@ -171,8 +174,9 @@ class NormalConeFront:
                 TableSpec("_split", n + 1, wp.int32), TableSpec("_keep_offsets", n + 1, wp.int32),
                 TableSpec("_split_offsets", n + 1, wp.int32), TableSpec("in_front", n + 1, wp.int32),
                 TableSpec("_marked", n + 1, wp.int32),
-                # Sorted at capacity (N slots, the unused ones padded to sort last); radix sort needs twice that.
-                TableSpec("_sort_keys", 2 * n, wp.int32), TableSpec("_sort_values", 2 * n, wp.int32)]
+                # The front nodes' face ranges as +-(node + 1) marks per face position, and their prefix sums.
+                TableSpec("_range_marks", self.bvh.face_count + 1, wp.int32),
+                TableSpec("_range_owner", self.bvh.face_count + 1, wp.int32)]
 
     def _place_scratch(self) -> None:
         """(Re)make the per-call tables; the launches are recorded again at the next update."""
@@ -311,8 +315,9 @@ class NormalConeFront:
         launches["start_sprout"].launch()
         wp.capture_while(self._frontier_count, self._sprout_level)
         launches["finish_sprout"].launch()
-        launches["write_sort_keys"].launch()
-        wp.utils.radix_sort_pairs(self._sort_keys, self._sort_values, self.bvh.node_count, 0, self._sort_bits)
+        launches["clear_range_marks"].launch()
+        launches["mark_front_ranges"].launch()
+        self._scan(self._range_marks, self._range_owner, inclusive=True)
         launches["assign_node_ids"].launch()
         return self.node_id
 
@@ -392,10 +397,10 @@ class NormalConeFront:
             "copy_frontier": record(_copy_nodes, n, [self._frontier_next, self._frontier_count], [self._frontier]),
             "finish_sprout": record(_finish_sprout, n, [self._front_next, self._counters],
                                     [self.front, self.front_count]),
-            "write_sort_keys": record(_write_sort_keys, n, [bvh, self.front, self.front_count, self.bvh.face_count],
-                                   [self._sort_keys, self._sort_values]),
-            "assign_node_ids": record(_assign_node_ids, self.bvh.face_count,
-                                      [bvh, self._sort_keys, self._sort_values, self.front_count],
+            "clear_range_marks": record(_clear_range_marks, self.bvh.face_count + 1, [], [self._range_marks]),
+            "mark_front_ranges": record(_mark_front_ranges, n, [bvh, self.front, self.front_count],
+                                        [self._range_marks]),
+            "assign_node_ids": record(_assign_node_ids, self.bvh.face_count, [bvh, self._range_owner],
                                       [self.node_id]),
         }
         self._launch_key = key

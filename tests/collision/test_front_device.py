@@ -238,7 +238,7 @@ def test_per_call_tables_in_lent_memory_give_the_same_fronts_and_follow_a_replac
     lent = NormalConeFront(own.bvh, faces, device, 2)
     buffers = [wp.zeros(8 * own.bvh.node_count, dtype=wp.vec3, device=device)]  # room for every table
     lent.lend_scratch(lambda: buffers)
-    assert {"node_mask", "_sort_keys", "_frontier"} <= lent._lent_names
+    assert {"node_mask", "_range_marks", "_range_owner", "_frontier"} <= lent._lent_names
     assert lent.device_bytes < own.device_bytes
     for step, (s, noise) in enumerate(_CYCLE):
         x0, x1 = _positions(mesh, s, noise, seed=step)
