@@ -102,6 +102,16 @@ So two groups whose grown slabs miss each other hold no pair of faces closer tha
 tests of their face pairs may be skipped. Dimensionless.
 """
 
+GROUP_BOUND_RELATIVE_PAD: float = 2.0**-17
+"""Extra growth, times M (as for :data:`GROUP_SLAB_RELATIVE_PAD`), of the interval the group slab test
+bounds the smaller group by without projecting its vertices (:mod:`pscc.collision.spatial_hash`):
+its own slab on its own axis a_h moved by c . (a - a_h) +- R |a - a_h| (or with -a_h), and its bounding
+sphere c +- R on the larger group's axis a. The float32 errors: the sphere's centre (u M per
+component, which R absorbs as about 2 u M), c . delta (3 u sum |c_k delta_k| <= 6.1 u M with |delta_k| <=
+2 + 2u), R |delta| (about 4 u of R |delta| <= 2 M, with R <= M), and four additions of terms below 6 M
+(24 u M): under 50 u M in all. 128 u = 2^-17 covers it with a factor above 2. Dimensionless.
+"""
+
 NORMAL_CONE_MARGIN: float = 1.0e-5
 """Relative margin of the normal-cone and contour sign tests (:mod:`pscc.geometry.normal_cone`).
 

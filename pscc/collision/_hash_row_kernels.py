@@ -31,6 +31,7 @@ from pscc.collision._spatial_hash_kernels import (
     _MASK_BITS,
     _ROWS,
     _SAME_NODE,
+    _SLAB_SAVED,
     _SLAB_TESTS,
     _TEST_CHUNK,
     DiagonalArgs,
@@ -40,6 +41,7 @@ from pscc.collision._spatial_hash_kernels import (
     cell_of_point,
     key_cell,
     linear_cell_id,
+    slab_test_on,
 )
 from pscc.collision.shared_vertex import (
     SHARED_CERTIFY,
@@ -88,14 +90,14 @@ def _compute_group_slabs(
     group_slab: wp.array(dtype=wp.vec2),
 ):
     """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
-    this one makes the slab of a flat patch thin), slab = its faces' interval on the axis.
-    A zero axis (a degenerate middle face) marks a group that is never culled. Groups
-    whose cell holds too few other entries for any slab test (``slab.min_work``), and groups too small to
-    be the larger group of a slab test, are skipped. The first
+    this one makes the slab of a flat patch thin), slab = its faces' interval on the axis, and the
+    bounding sphere of its vertices (``slab.group_sphere``). A zero axis (a degenerate middle face)
+    marks a group that is never culled. Groups whose cell holds too few other entries for any slab test
+    (``slab.min_work``) are skipped. The first
     group of each cell also writes the cell's ``slab.group_skip``."""
     g = wp.tid()
     live = int(info[_LIVE_GROUPS])
-    if g >= live:
+    if g >= live or not slab_test_on(slab):
         return
     start = group_start[g]
     end = group_end[g]
@@ -124,9 +126,9 @@ def _compute_group_slabs(
         cell_start = cell_end[cell - 1]
     others = (cell_end[cell] - cell_start) - (end - start)
     size = wp.int64(end - start)
-    # A slab test of groups g and h reads the axis and slab of the larger one (g on a tie), and runs
-    # only when n_g n_h >= min_work: a group with n_g^2 < min_work is never the one read.
-    if size * wp.int64(others) < slab.min_work or size * size < slab.min_work:
+    # A slab test of groups g and h reads the axis, slab and sphere of both, and runs only when
+    # n_g n_h >= min_work: a group with n_g x (the rest of its cell) < min_work is in none.
+    if size * wp.int64(others) < slab.min_work:
         group_axis[g] = wp.vec3(0.0, 0.0, 0.0)
         return
     # The normal of the group's middle face (in fill order): one cross product
@@ -145,7 +147,35 @@ def _compute_group_slabs(
     if length > 0.0:
         axis = n / length
     group_axis[g] = axis
-    group_slab[g] = _project_group(entry_face, start, end, axis, slab)
+    # One pass over the group's vertices (both ends of the step): the slab on the axis, and their box,
+    # whose centre and half diagonal are the group's bounding sphere.
+    lo = float(wp.inf)
+    hi = float(-wp.inf)
+    lower = wp.vec3(wp.inf, wp.inf, wp.inf)
+    upper = wp.vec3(-wp.inf, -wp.inf, -wp.inf)
+    faces = slab.faces
+    x0 = slab.positions_t0
+    x1 = slab.positions_t1
+    for e in range(start, end):
+        tri = faces[entry_face[e]]
+        for v in range(3):
+            p = x0[tri[v]]
+            s = wp.dot(axis, p)
+            lo = wp.min(lo, s)
+            hi = wp.max(hi, s)
+            lower = wp.min(lower, p)
+            upper = wp.max(upper, p)
+            if slab.swept != 0:
+                p = x1[tri[v]]
+                s = wp.dot(axis, p)
+                lo = wp.min(lo, s)
+                hi = wp.max(hi, s)
+                lower = wp.min(lower, p)
+                upper = wp.max(upper, p)
+    group_slab[g] = wp.vec2(lo, hi)
+    centre = 0.5 * (lower + upper)
+    radius = 0.5 * wp.length(upper - lower)
+    slab.group_sphere[g] = wp.vec4(centre[0], centre[1], centre[2], radius)
 
 
 @wp.func
@@ -155,30 +185,72 @@ def _slab_pair_passes(
     group_slab: wp.array(dtype=wp.vec2),
     g: int,
     g_start: int,
-    g_end: int,
+    g_size: int,
     h: int,
     h_start: int,
-    h_end: int,
+    h_size: int,
     slab: SlabArgs,
     margin: float,
+    bound_pad: float,
 ) -> bool:
     """False when the faces of groups g and h are provably farther apart than twice the half distance:
-    the smaller group projected on the larger group's axis misses that group's slab."""
+    a bound of the smaller group's vertices on the larger group's axis a misses that group's slab.
+
+    The bound, in O(1): for a vertex p of the smaller group (sphere c, R; own axis a_h, slab [lo, hi]),
+    p . a = p . a_h + c . delta + (p - c) . delta with delta = a - a_h, so p . a lies in
+    [lo, hi] + c . delta +- R |delta| (with -a_h and -[hi, lo] when a + a_h is the shorter delta: facing
+    layers), and in c . a +- R; both hold, so the bound is their intersection, grown by ``bound_pad``
+    for its rounding. Parallel layers (delta near 0) get their own slabs' tightness. When that bound
+    meets the slab and the groups would need at least ``slab.exact_min_work`` face tests, the smaller
+    group's vertices are projected on the axis one by one (the exact interval) and tested again."""
     owner = g
-    other_start = h_start
-    other_end = h_end
-    if h_end - h_start > g_end - g_start:
+    other = h
+    if h_size > g_size:
         owner = h
-        other_start = g_start
-        other_end = g_end
+        other = g
     axis = group_axis[owner]
     if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
         return True
     own = group_slab[owner]
-    other = _project_group(entry_face, other_start, other_end, axis, slab)
-    if other[0] - margin > own[1] + margin:
+    sphere = slab.group_sphere[other]
+    centre = wp.vec3(sphere[0], sphere[1], sphere[2])
+    radius = sphere[3]
+    middle = wp.dot(axis, centre)
+    lo = middle - radius
+    hi = middle + radius
+    other_axis = group_axis[other]
+    if not (other_axis[0] == 0.0 and other_axis[1] == 0.0 and other_axis[2] == 0.0):
+        other_slab = group_slab[other]
+        delta = axis - other_axis
+        base_lo = other_slab[0]
+        base_hi = other_slab[1]
+        facing = axis + other_axis
+        if wp.dot(facing, facing) < wp.dot(delta, delta):
+            delta = facing
+            base_lo = -other_slab[1]
+            base_hi = -other_slab[0]
+        shift = wp.dot(centre, delta)
+        spread = radius * wp.length(delta)
+        lo = wp.max(lo, base_lo + shift - spread)
+        hi = wp.min(hi, base_hi + shift + spread)
+    lo = lo - bound_pad
+    hi = hi + bound_pad
+    if lo - margin > own[1] + margin:
         return False
-    if own[0] - margin > other[1] + margin:
+    if own[0] - margin > hi + margin:
+        return False
+    if wp.int64(g_size) * wp.int64(h_size) < slab.exact_min_work:
+        return True
+    # Large enough to pay for it: the smaller group's vertices projected on the axis one by one.
+    other_start = h_start
+    other_end = h_start + h_size
+    if other == g:
+        other_start = g_start
+        other_end = g_start + g_size
+    exact = _project_group(entry_face, other_start, other_end, axis, slab)
+    if exact[0] - margin > own[1] + margin:
+        return False
+    if own[0] - margin > exact[1] + margin:
         return False
     return True
 
@@ -227,6 +299,8 @@ def _plan_rows(
         row_count[g] = 0
         return
     margin = grid[0].margin
+    bound_pad = grid[0].bound_pad
+    slab_on = slab_test_on(slab)
     start = group_start[g]
     end = group_end[g]
     n_g = wp.int64(end - start)
@@ -236,13 +310,14 @@ def _plan_rows(
     in_run = bool(False)
     work = wp.int64(0)
     slab_tests = wp.int64(0)
+    saved = wp.int64(0)
     key = entry_key[start]
     same_node = wp.int64(0)
     h = g + 1
     t = int(0)
     b = end
     while b < stop:
-        rest_passes = check_keys == 0 and (slab.enabled == 0 or t >= _MASK_BITS)
+        rest_passes = check_keys == 0 and (not slab_on or t >= _MASK_BITS)
         if not rest_passes and check_keys == 0:
             skip = slab.group_skip[h - 1]
             if n_g * wp.int64(skip[0]) < slab.min_work:
@@ -279,11 +354,13 @@ def _plan_rows(
         if check_keys != 0 and entry_key[b] == key:
             passed = False
             same_node += n_g * wp.int64(h_end - b)
-        elif slab.enabled != 0 and t < _MASK_BITS:
+        elif slab_on and t < _MASK_BITS:
             if n_g * wp.int64(h_end - b) >= slab.min_work:
                 slab_tests += wp.int64(1)
-                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end, h, b, h_end, slab,
-                                           margin)
+                passed = _slab_pair_passes(entry_face, group_axis, group_slab, g, start, end - start, h, b,
+                                           h_end - b, slab, margin, bound_pad)
+                if not passed:
+                    saved += n_g * wp.int64(h_end - b)
             if passed:
                 mask = mask | (wp.uint64(1) << wp.uint64(t))
         if passed:
@@ -294,13 +371,15 @@ def _plan_rows(
         b = h_end
         h += 1
         t += 1
-    if slab.enabled != 0:
+    if slab_on:
         group_mask[g] = mask
     row_count[g] = runs
     if work > wp.int64(0):
         wp.atomic_add(info, _FACE_TESTS, work)
     if slab_tests > wp.int64(0):
         wp.atomic_add(info, _SLAB_TESTS, slab_tests)
+    if saved > wp.int64(0):
+        wp.atomic_add(info, _SLAB_SAVED, saved)
     if same_node > wp.int64(0):
         wp.atomic_add(info, _SAME_NODE, same_node)
 
@@ -344,7 +423,7 @@ def _write_rows(
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
     group_mask: wp.array(dtype=wp.uint64),
-    slab_enabled: int,
+    slab: SlabArgs,
     check_keys: int,
     row_count: wp.array(dtype=wp.int32),
     row_end: wp.array(dtype=wp.int32),
@@ -362,8 +441,9 @@ def _write_rows(
     slot = row_end[g] - row_count[g]
     n_g = wp.int64(group_end[g] - group_start[g])
     stop = cell_end[group_cell[g]]
+    slab_enabled = slab_test_on(slab)
     mask = wp.uint64(0)
-    if slab_enabled != 0:
+    if slab_enabled:
         mask = group_mask[g]
     key = entry_key[group_start[g]]
     h = g + 1
@@ -373,7 +453,7 @@ def _write_rows(
     while b < stop:
         # The rest is one run when nothing is checked past here: no key check, and no slab test, past
         # MASK_BITS, or every mask bit from t on set (``_plan_rows`` sets them all when it stops early).
-        if check_keys == 0 and (slab_enabled == 0 or t >= _MASK_BITS
+        if check_keys == 0 and (not slab_enabled or t >= _MASK_BITS
                                 or (mask | ((wp.uint64(1) << wp.uint64(wp.min(t, _MASK_BITS - 1))) - wp.uint64(1)))
                                 == ~wp.uint64(0)):
             if run_start < 0:
@@ -383,7 +463,7 @@ def _write_rows(
         passed = bool(True)
         if check_keys != 0 and entry_key[b] == key:
             passed = False
-        elif slab_enabled != 0 and t < _MASK_BITS:
+        elif slab_enabled and t < _MASK_BITS:
             passed = ((mask >> wp.uint64(t)) & wp.uint64(1)) != wp.uint64(0)
         if passed and run_start < 0:
             run_start = b
@@ -398,6 +478,35 @@ def _write_rows(
     if run_start >= 0:
         row_span[slot] = wp.vec3i(g, run_start, stop)
         row_work[slot] = n_g * wp.int64(stop - run_start)
+
+
+@wp.kernel
+def _update_slab_policy(
+    # in:
+    info: wp.array(dtype=wp.int64),
+    counts: wp.array(dtype=wp.int64),
+    pair_capacity: wp.int64,
+    test_cost: wp.int64,
+    group_cost: wp.int64,
+    probe_interval: int,
+    # out:
+    policy: wp.array(dtype=wp.int32),
+):
+    """A single thread, after the test pass: whether the next call slab-tests. A call that did keeps it
+    on when the face tests its separated group pairs saved outweigh what the test cost (``test_cost``
+    face tests per slab test and ``group_cost`` per group of the call); a call that did not counts, and
+    the ``probe_interval``-th such call turns it on again, to measure anew. A call whose rows or pairs
+    did not fit its buffers changes nothing: it is run again, and the run again decides."""
+    if info[_LIVE_ROWS] == wp.int64(0) or counts[0] > pair_capacity:
+        return
+    if policy[0] != 0:
+        cost = info[_SLAB_TESTS] * test_cost + info[_LIVE_GROUPS] * group_cost
+        policy[0] = int(info[_SLAB_SAVED] > cost)
+        policy[1] = 0
+    else:
+        policy[1] = policy[1] + 1
+        if policy[1] >= probe_interval:
+            policy[0] = 1
 
 
 @wp.func
@@ -555,9 +664,10 @@ def _test_bounding_volumes(
     in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
     the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
     order, in a tight scan) and hold the token (``codes_hold_token``, which then replaces the token test
-    on the boxes); the codes never reject a pair whose boxes overlap and whose cell emits it. A pair of faces that share a vertex is
-    dropped with ``shared.mode`` skip (before the diagonals), or with certify, after every other test,
-    when its two faces are certified (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
+    on the boxes); the codes never reject a pair whose boxes overlap and whose cell emits it. A pair of
+    faces that share a vertex is dropped with ``shared.mode`` skip (before the diagonals), or with
+    certify, after every other test, when its two faces are certified
+    (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
     total = info[_LIVE_TESTS]
     chunk = info[_TEST_CHUNK]
     k = wp.int64(wp.tid()) * chunk

@@ -66,7 +66,8 @@ INFO_LIVE_ROWS: int = 14
 INFO_LIVE_TESTS: int = 15  # BV tests the test pass runs
 INFO_TEST_CHUNK: int = 16  # BV tests per test thread (a contiguous chunk each)
 INFO_CELL_CODES: int = 17  # 1: the test pass reads the entries' cell codes (enough BV tests per entry)
-INFO_SIZE: int = 18
+INFO_SLAB_SAVED: int = 18  # face tests of the group pairs the slab test separated
+INFO_SIZE: int = 19
 """Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size and the pairs emitted."""
 SUMMARY_DIMS: int = INFO_SIZE
 SUMMARY_CELL_SIZE: int = INFO_SIZE + 3
@@ -77,6 +78,7 @@ _MASK_BITS = wp.constant(MASK_BITS)
 _MAX_GRID_CELLS = wp.constant(wp.int64(MAX_GRID_CELLS))
 _MAX_GRID_CELLS_F = wp.constant(wp.float64(MAX_GRID_CELLS))
 _SLAB_PAD = wp.constant(wp.float64(tolerances.GROUP_SLAB_RELATIVE_PAD))
+_BOUND_PAD = wp.constant(wp.float64(tolerances.GROUP_BOUND_RELATIVE_PAD))
 _ENTRIES = wp.constant(INFO_ENTRIES)
 _GROUPS = wp.constant(INFO_GROUPS)
 _CELLS = wp.constant(INFO_CELLS)
@@ -95,18 +97,21 @@ _LIVE_ROWS = wp.constant(INFO_LIVE_ROWS)
 _LIVE_TESTS = wp.constant(INFO_LIVE_TESTS)
 _TEST_CHUNK = wp.constant(INFO_TEST_CHUNK)
 _CELL_CODES = wp.constant(INFO_CELL_CODES)
+_SLAB_SAVED = wp.constant(INFO_SLAB_SAVED)
 _INFO_SIZE = wp.constant(INFO_SIZE)
 
 
 @wp.struct
 class GridState:
     """The grid of the current call, written on the device: cell of p = floor((p - origin) /
-    cell_size) per axis, ``dims`` cells per axis; ``margin`` grows each end of a group slab."""
+    cell_size) per axis, ``dims`` cells per axis; ``margin`` grows each end of a group slab, and
+    ``bound_pad`` the bound of the smaller group in a group slab test (the rounding of that bound)."""
 
     origin: wp.vec3
     cell_size: float
     dims: wp.vec3i
     margin: float
+    bound_pad: float
 
 
 @wp.struct
@@ -143,7 +148,9 @@ class SlabArgs:
     pass groups too small to be slab-tested: [0] the size of the largest group after g in its cell (0
     for the last); [1] and [2] the first group after g in its cell with at least ``min_work`` and
     ``ceil(min_work / 2)`` entries (the smallest that a group of one or two entries slab-tests), or
-    one past the cell's last group.
+    one past the cell's last group. ``group_sphere[g]`` (centre, radius) bounds the vertices of group g.
+    ``policy`` (persistent, :func:`slab_test_on`): [0] = 1 when this call slab-tests, [1] = calls since
+    the last call that did.
     """
 
     enabled: int
@@ -152,7 +159,17 @@ class SlabArgs:
     positions_t1: wp.array(dtype=wp.vec3)
     swept: int
     min_work: wp.int64
+    exact_min_work: wp.int64
     group_skip: wp.array(dtype=wp.vec3i)
+    group_sphere: wp.array(dtype=wp.vec4)
+    policy: wp.array(dtype=wp.int32)
+
+
+@wp.func
+def slab_test_on(slab: SlabArgs) -> bool:
+    """Whether this call runs the group slab test: configured (``enabled``) and chosen by the policy
+    the last slab-testing call left (``_update_slab_policy``)."""
+    return slab.enabled != 0 and slab.policy[0] != 0
 
 
 @wp.func
@@ -350,6 +367,7 @@ def _plan_grid(
         upper = lower + (scene[3 + k] - scene[k])
         size = size + wp.max(wp.abs(lower), wp.abs(upper))
     state.margin = wp.float32(half_distance * (wp.float64(1.0) + _SLAB_PAD) + _SLAB_PAD * (size + half_distance))
+    state.bound_pad = wp.float32(_BOUND_PAD * size)
     cell = fixed_cell_size
     if cell <= wp.float64(0.0):
         cell = cell_size_factor * (scene[6] / wp.float64(face_count))

@@ -94,6 +94,7 @@ from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
     DEFAULT_CELL_SIZE_FACTOR,
     DEFAULT_MAX_MEAN_CELLS_PER_FACE,
+    DEFAULT_SLAB_EXACT_MIN_WORK,
     DEFAULT_SLAB_MIN_WORK,
     DEFAULT_TEST_THREADS,
     GROWTH,
@@ -102,6 +103,9 @@ from pscc.collision.spatial_hash_settings import (
     MAX_PAIRS,
     MIN_CELL_BITS,
     SCENE_CHUNKS,
+    SLAB_GROUP_COST,
+    SLAB_PROBE_INTERVAL,
+    SLAB_TEST_COST,
     TESTS_PER_LAUNCH,
     SpatialHashStats,
     check_positive,
@@ -113,6 +117,7 @@ __all__ = [
     "CELL_CODE_MIN_TESTS",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_SLAB_EXACT_MIN_WORK",
     "DEFAULT_SLAB_MIN_WORK",
     "DEFAULT_TEST_THREADS",
     "MAX_ENTRIES",
@@ -166,6 +171,9 @@ class SpatialHash:
             separated along a group axis: a superset of the pairs closer than twice the half
             distance, a subset of the box pairs.
         slab_min_work: slab-test two groups only when they would need this many face tests.
+        slab_exact_min_work: when the slab test's O(1) bound of the smaller group does not separate two
+            groups, project the smaller group's vertices one by one only when the groups would need this
+            many face tests (at least ``slab_min_work`` to matter).
         cell_code_min_tests: a call whose test pass runs at least this many BV tests per entry first
             compares the entries' 4-byte cell codes (each box end as a fifteenth of the cell, read in
             entry order) and loads the boxes only where the codes overlap; the pairs are the same
@@ -193,6 +201,7 @@ class SpatialHash:
         tests_per_thread: int | None = None,
         group_slab_test: bool = False,
         slab_min_work: int = DEFAULT_SLAB_MIN_WORK,
+        slab_exact_min_work: int = DEFAULT_SLAB_EXACT_MIN_WORK,
         cell_code_min_tests: int = CELL_CODE_MIN_TESTS,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
@@ -201,6 +210,11 @@ class SpatialHash:
             raise InputError("argument", "slab_min_work", f"{slab_min_work!r} is not an integer >= 1",
                              "pass a positive integer such as 8")
         self.slab_min_work = int(slab_min_work)
+        if (isinstance(slab_exact_min_work, bool) or not isinstance(slab_exact_min_work, int | np.integer)
+                or slab_exact_min_work < 1):
+            raise InputError("argument", "slab_exact_min_work", f"{slab_exact_min_work!r} is not an integer >= 1",
+                             "pass a positive integer such as 64")
+        self.slab_exact_min_work = int(slab_exact_min_work)
         if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
             raise InputError("argument", "face_count", f"{face_count!r} is not an integer >= 0",
                              "pass the number of faces")
@@ -268,6 +282,8 @@ class SpatialHash:
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.grid_max = wp.zeros(4, dtype=wp.int32, device=dev)
         self.info = wp.zeros(kernels.INFO_SIZE, dtype=wp.int64, device=dev)
+        # The group slab test's policy, kept across calls (SlabArgs.policy): the first call slab-tests.
+        self.slab_policy = wp.array([1, 0], dtype=wp.int32, device=dev)
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
         self.summary = wp.zeros(kernels.SUMMARY_SIZE, dtype=wp.float64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
@@ -381,6 +397,7 @@ class SpatialHash:
                   TableSpec("row_work", rows, wp.int64), TableSpec("row_scan", rows, wp.int64),
                   TableSpec("group_axis", slabs, wp.vec3), TableSpec("group_slab", slabs, wp.vec2),
                   TableSpec("group_mask", slabs, wp.uint64), TableSpec("group_skip", slabs, wp.vec3i),
+                  TableSpec("group_sphere", slabs, wp.vec4),
                   TableSpec("pairs", pair_slots, wp.vec2i, output=True),
                   TableSpec("pair_keys", pair_slots if self.sort_pairs else 1, wp.int64)]
         lenders = self._lenders()
@@ -411,8 +428,9 @@ class SpatialHash:
         # group_rank, cell_rank and group_start are views into the entry buffers' sort scratch.
         names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
-                 "faces", "entry_key", "entry_face", "entry_code", "cell_end",
-                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "row_span",
+                 "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "cell_end",
+                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "group_sphere",
+                 "row_span",
                  "row_work",
                  "row_scan", "pairs", "pair_keys")
         # Tables in a lent buffer (lend_scratch) and faces passed in are the caller's memory: counted as 0.
@@ -613,6 +631,11 @@ class SpatialHash:
             self._test_pairs(face_lower, face_upper, diagonals, shared, node_bits)
             if self.sort_pairs:
                 self._sort_pairs()
+            if slab.enabled:
+                wp.launch(row_kernels._update_slab_policy, dim=1,
+                          inputs=[self.info, self.counts, self.pair_capacity, SLAB_TEST_COST, SLAB_GROUP_COST,
+                                  SLAB_PROBE_INTERVAL],
+                          outputs=[self.slab_policy], device=dev)
         wp.launch(kernels._gather_summary, dim=1, inputs=[self.info, self.grid, self.counts],
                   outputs=[self.summary], device=dev)
 
@@ -781,7 +804,10 @@ class SpatialHash:
         slab.faces = self.faces
         slab.swept = 0
         slab.min_work = self.slab_min_work
+        slab.exact_min_work = self.slab_exact_min_work
         slab.group_skip = self.group_skip
+        slab.group_sphere = self.group_sphere
+        slab.policy = self.slab_policy
         if not (self.group_slab_test and grouped):
             slab.positions_t0 = slab.positions_t1 = self.chunk_lower
             return slab, 0.0
@@ -937,7 +963,7 @@ class SpatialHash:
                   outputs=[self.info], device=dev)
         wp.launch(row_kernels._write_rows, dim=g,
                   inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_mask, slab.enabled, check_keys, self.row_count, self.row_end, self.info],
+                          self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info],
                   outputs=[self.row_span, self.row_work], device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
         wp.launch(row_kernels._write_entry_codes, dim=n,

@@ -15,6 +15,10 @@ __all__ = [
     "CELL_CODE_MIN_TESTS",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_SLAB_EXACT_MIN_WORK",
+    "SLAB_GROUP_COST",
+    "SLAB_PROBE_INTERVAL",
+    "SLAB_TEST_COST",
     "DEFAULT_SLAB_MIN_WORK",
     "DEFAULT_TEST_THREADS",
     "GROWTH",
@@ -58,6 +62,27 @@ DEFAULT_SLAB_MIN_WORK: int = 16
 """Two groups are slab-tested only when they would need at least this many face tests (n_g n_h):
 a slab test projects the smaller group's vertices, so tiny groups are cheaper to test face by face
 (16 since the cell codes made a face test cheaper; ``docs/spatial-hash.md`` section 3a)."""
+
+DEFAULT_SLAB_EXACT_MIN_WORK: int = 64
+"""A slab test whose O(1) bound of the smaller group meets the larger group's slab projects the
+smaller group's vertices one by one (the exact interval) only when the two groups would need at least
+this many face tests (``docs/spatial-hash.md`` section 3a)."""
+
+SLAB_TEST_COST: int = 24
+"""What one group slab test costs, in face tests (BV tests), for the slab policy: a call keeps the slab
+test for the next call when the face tests it saved exceed this many per slab test plus
+:data:`SLAB_GROUP_COST` per group. Fitted to the corpus frames on this 2-core CPU (graph replays with
+the test on and off: `twisting`, `cloth_twist`, `unisex_shirt`, `cloth_rollers`): about 57 ns per slab
+test (its bound, the exact projection of larger pairs, the row walk) and 54 ns per group, against about
+2.5 ns per face test."""
+
+SLAB_GROUP_COST: int = 20
+"""What computing one group's slab and sphere and walking its rows costs, in face tests (see
+:data:`SLAB_TEST_COST`)."""
+
+SLAB_PROBE_INTERVAL: int = 8
+"""After this many calls without the group slab test (the policy found it did not pay), the next call
+runs it again and measures anew."""
 
 DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
 """Grid guard: when the entries exceed this many per face, the cell size is doubled and the

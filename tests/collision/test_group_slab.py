@@ -152,6 +152,25 @@ def test_twisted_layers_over_a_step() -> None:
     assert slab.stats.slab_tests > 0 and dropped > 0
 
 
+@pytest.mark.parametrize("swept", [False, True])
+def test_constant_time_bound_alone_is_conservative(swept: bool) -> None:
+    """With the exact projection switched off (``slab_exact_min_work`` past every pair), the O(1) bound of
+    the smaller group (its own slab moved by c . delta +- R |delta|, and its sphere) still drops only
+    pairs farther than the distance, and still drops some between twisted and between tilted layers."""
+    mesh = folded_sheet(1500, layers=3, seed=3)
+    x0 = _twist(mesh.vertices_end if not swept else mesh.vertices, 0.5)
+    x1 = _twist(mesh.vertices_end, 0.51) if swept else None
+    detector = CollisionDetector(mesh.faces, rest=mesh.rest, device="cpu")
+    detector.detect(x0, x1, thickness=0.5 * _edge(x0, mesh.faces))
+    node = detector.front.node_id.numpy()
+    half = 0.25 * _edge(x0, mesh.faces)
+    _, dropped = _check_conservative(mesh.faces, x0, x1, node, half, slab_exact_min_work=2**40)
+    assert dropped > 0
+    x, faces, plate = _tilted_plates(0.04)
+    _, dropped = _check_conservative(faces, x, None, plate, 0.005, slab_exact_min_work=2**40, slab_min_work=4)
+    assert dropped > 0
+
+
 def _two_sheets(gap: float, tilt: float, n: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Two parallel n x n sheets ``gap`` apart, both rotated by ``tilt`` about the x axis."""
     vertices, sheet_faces, _ = grid_sheet(n, n)
@@ -345,3 +364,76 @@ def test_bad_face_order() -> None:
         hash_.find_pairs(box, box, wp.array(np.array([0, 1, 0], dtype=np.int32), device=device),
                          face_order=wp.array(np.array([0, 1, 2], dtype=np.int32), device=device))
     del faces
+
+
+def _tilted_plates(gap: float, plates: int = 6, cells: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``plates`` parallel square plates tilted 45 degrees about x, ``gap`` apart along their normal:
+    their faces' boxes overlap across plates (tilted), their slabs do not when the gap exceeds the
+    distance. One node per plate."""
+    vertices, faces, _ = grid_sheet(cells, cells)
+    normal = np.array([0.0, -np.sqrt(0.5), np.sqrt(0.5)])
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.sqrt(0.5), -np.sqrt(0.5)], [0.0, np.sqrt(0.5), np.sqrt(0.5)]])
+    xs, fs, nodes = [], [], []
+    for k in range(plates):
+        xs.append(vertices @ tilt.T + k * gap * normal)
+        fs.append(faces + k * vertices.shape[0])
+        nodes.append(np.full(faces.shape[0], k, dtype=np.int32))
+    return np.concatenate(xs).astype(np.float32), np.concatenate(fs).astype(np.int32), np.concatenate(nodes)
+
+
+def _policy_calls(x: np.ndarray, faces: np.ndarray, node: np.ndarray, half: float,
+                  calls: int) -> list[tuple[int, bytes]]:
+    """(slab tests, sorted pairs) of ``calls`` host calls of one hash on the same boxes."""
+    device = "cpu"
+    hash_ = SpatialHash(faces.shape[0], device, faces=wp.array(faces, dtype=wp.vec3i, device=device),
+                        group_slab_test=True, slab_min_work=4)
+    lower, upper = _boxes(faces, x, None, half)
+    arrays = (wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device),
+              wp.array(node, dtype=wp.int32, device=device))
+    out = []
+    for _ in range(calls):
+        hash_.find_pairs(*arrays, 0.25, positions_t0=wp.array(x, dtype=wp.vec3, device=device), half_distance=half)
+        out.append((hash_.stats.slab_tests, hash_.pairs_numpy().tobytes()))
+    return out
+
+
+def test_slab_policy_keeps_the_test_where_it_pays() -> None:
+    """Tilted plates 0.04 apart at half distance 0.005: the slab test separates every plate pair (their
+    boxes overlap), saves far more face tests than it costs, and runs on every call."""
+    x, faces, node = _tilted_plates(0.04)
+    calls = _policy_calls(x, faces, node, 0.005, 4)
+    assert all(tests > 0 for tests, _ in calls)
+    assert len({pairs for _, pairs in calls}) == 1
+
+
+def test_slab_policy_drops_the_test_where_it_does_not_pay_and_probes_again() -> None:
+    """Plates 0.0015 apart at half distance 0.005 (all six within the distance): no group pair separates, so
+    after the first call the test is off; the SLAB_PROBE_INTERVAL-th call after runs it again. The
+    pairs are the same on every call (nothing was separated)."""
+    from pscc.collision.spatial_hash_settings import SLAB_PROBE_INTERVAL
+
+    x, faces, node = _tilted_plates(0.0015)
+    calls = _policy_calls(x, faces, node, 0.005, SLAB_PROBE_INTERVAL + 3)
+    tests = [t for t, _ in calls]
+    assert tests[0] > 0
+    assert tests[1:SLAB_PROBE_INTERVAL + 1] == [0] * SLAB_PROBE_INTERVAL
+    assert tests[SLAB_PROBE_INTERVAL + 1] > 0  # the probe
+    assert tests[SLAB_PROBE_INTERVAL + 2] == 0
+    assert len({pairs for _, pairs in calls}) == 1
+    assert len(calls[0][1]) > 0
+
+
+def test_slab_policy_is_not_stepped_by_a_call_that_overflowed() -> None:
+    """A first call whose pair buffer is too small is run again by the host API; the policy the run
+    again reads is the first call's (on), so the slab test runs in it."""
+    x, faces, node = _tilted_plates(0.0015)
+    device = "cpu"
+    hash_ = SpatialHash(faces.shape[0], device, faces=wp.array(faces, dtype=wp.vec3i, device=device),
+                        group_slab_test=True, slab_min_work=4, pair_capacity=1)
+    lower, upper = _boxes(faces, x, None, 0.005)
+    hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device),
+                     wp.array(node, dtype=wp.int32, device=device), 0.25,
+                     positions_t0=wp.array(x, dtype=wp.vec3, device=device), half_distance=0.005)
+    assert hash_.stats.reruns > 0
+    assert hash_.stats.slab_tests > 0
+    assert hash_.slab_policy.numpy()[0] == 0  # and the completed call turned it off
