@@ -7,10 +7,12 @@ import warp as wp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pscc import tolerances
 from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs, ownership_bits
+from pscc.collision.pair_filter import _plane_separates_static
 from pscc.mesh import MeshTopology, grid_sheet
 
 
@@ -102,3 +104,55 @@ def test_supporting_plane_drops_separated_pairs() -> None:
     assert len(vf) == 0 and len(ee) == 0
     _, vf, ee = _extract(faces, 6, np.array([[0, 1]]), positions=x, thickness=2.0)
     assert len(vf) == 6 and len(ee) == 9
+
+
+@wp.kernel
+def _separated(tris: wp.array(dtype=wp.vec3, ndim=2), thickness: wp.array(dtype=wp.float32), factor: float,
+               out: wp.array(dtype=wp.int32)):
+    i = wp.tid()
+    h = thickness[i]
+    a0 = tris[i, 0]
+    a1 = tris[i, 1]
+    a2 = tris[i, 2]
+    b0 = tris[i, 3]
+    b1 = tris[i, 4]
+    b2 = tris[i, 5]
+    out[i] = int(_plane_separates_static(a0, a1, a2, b0, b1, b2, h, factor)
+                 or _plane_separates_static(b0, b1, b2, a0, a1, a2, h, factor))
+
+
+def test_supporting_plane_test_against_float64() -> None:
+    """Random triangle pairs (tilted, near-parallel, touching, at distances around the thickness): a pair
+    the supporting-plane test separates is farther apart than the thickness (float64 ipctk distance),
+    and a pair that a float64 supporting plane separates by more than 1e-5 of its size is separated."""
+    from tests.collision.test_group_slab import _triangle_distance
+
+    rng = np.random.default_rng(12)
+    n = 3000
+    a = rng.uniform(-1, 1, (n, 3, 3))
+    normal = rng.normal(size=(n, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    offset = normal * rng.uniform(-0.5, 0.5, (n, 1))
+    b = a[:, rng.permutation(3)] * rng.uniform(0.5, 1.5, (n, 1, 1)) + offset[:, None, :]
+    b += rng.normal(size=(n, 3, 3)) * 10.0 ** rng.uniform(-6, -1, (n, 1, 1))
+    tris = np.concatenate([a, b], axis=1).astype(np.float32)
+    thickness = (rng.uniform(0.0, 0.3, n) * (rng.random(n) < 0.8)).astype(np.float32)
+    out = wp.zeros(n, dtype=wp.int32, device="cpu")
+    factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
+    wp.launch(_separated, dim=n, inputs=[wp.array(tris, dtype=wp.vec3, device="cpu"),
+                                         wp.array(thickness, device="cpu"), factor], outputs=[out], device="cpu")
+    separated = out.numpy().astype(bool)
+    t64 = tris.astype(np.float64)
+
+    def plane_margin(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+        s = np.einsum("nj,nkj->nk", nrm, q - p[:, :1])
+        return np.maximum(s.min(axis=1), -s.max(axis=1))  # > h: q beyond h on one side
+
+    margin = np.maximum(plane_margin(t64[:, :3], t64[:, 3:]), plane_margin(t64[:, 3:], t64[:, :3]))
+    clear = margin > thickness + 1e-5 * np.abs(t64).max(axis=(1, 2))
+    assert 300 < separated.sum() < n - 300
+    assert np.all(separated[clear])
+    for i in np.flatnonzero(separated):
+        assert _triangle_distance(t64[i, :3], t64[i, 3:]) > thickness[i], i
