@@ -14,11 +14,13 @@ owned_vertex_bits         (face_count,) int32  bit k set: the face owns its vert
 owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge k (face_edges)
 ========================  ===================  ==============================================
 
-Each triangle pair (a row of a row kernel, :mod:`pscc._lanes`) first counts its feature pairs whose
-own boxes overlap; a pair with any then meets the supporting-plane test of
-:mod:`pscc.collision.pair_filter` (the costlier test, so it runs only where it can save narrow-phase
-work) and, unless a plane separates its triangles, appends its feature pairs to the candidate buffers
-with one atomic add per kind. The pass is launched for the capacity of the triangle-pair buffer and
+Each triangle pair (a row of a row kernel, :mod:`pscc._lanes`) first meets the supporting-plane test
+of :mod:`pscc.collision.pair_filter`, per vertex (:func:`~pscc.collision.pair_filter.plane_sides`): the
+pair is dropped when one face's plane separates the other face; otherwise a vertex certified beyond the
+other face's plane, and an edge whose two ends are beyond it on one side, are left out of its feature
+pairs (none of them can come within the thickness). Of the rest, the feature pairs whose own boxes
+overlap are appended to the candidate buffers with one atomic add per kind. The pass is launched for
+the capacity of the triangle-pair buffer and
 reads the number of valid pairs from a device counter (:meth:`FeaturePairs.extract_device`), so it
 reads nothing back and can be captured. A buffer that overflows keeps counting on the device;
 :meth:`CandidatePairs.fits` grows it and the pass runs again (:meth:`FeaturePairs.extract` does both).
@@ -41,7 +43,7 @@ from pscc._lanes import row_lanes
 from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
-from pscc.collision.pair_filter import triangle_pair_separated
+from pscc.collision.pair_filter import plane_sides, sides_agree
 from pscc.collision.seams import SeamAdjacency, SeamArgs, stitched, stitched_to_face
 from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.ccd import CcdParameters, ccd_parameters
@@ -90,6 +92,22 @@ def _owned_vertex_mask(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.ar
 
 
 @wp.func
+def _inside_bits(sides: wp.vec3) -> int:
+    """Bit k: vertex k is not certified beyond the other face's plane (its side is 0)."""
+    return int(sides[0] == 0.0) | (int(sides[1] == 0.0) << 1) | (int(sides[2] == 0.0) << 2)
+
+
+@wp.func
+def _beyond_edge_bits(sides: wp.vec3) -> int:
+    """Bit k: both ends of the face's edge k, (v_k, v_k+1) (``MeshTopology.face_edges``), are beyond the
+    other face's plane on one side."""
+    b0 = int(sides[0] != 0.0 and sides[0] == sides[1])
+    b1 = int(sides[1] != 0.0 and sides[1] == sides[2])
+    b2 = int(sides[2] != 0.0 and sides[2] == sides[0])
+    return b0 | (b1 << 1) | (b2 << 2)
+
+
+@wp.func
 def _bit_count3(mask: int) -> int:
     return (mask & 1) + ((mask >> 1) & 1) + ((mask >> 2) & 1)
 
@@ -135,9 +153,10 @@ def _extract_features(
     pair_stats: wp.array(dtype=wp.int32),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid triangle pairs, the first
-    ``min(pair_counts[0], slots)``. For each: find its feature pairs whose boxes overlap (as bit masks,
-    each box loaded once); if there are any and no supporting plane separates the triangles, append them
-    (written only below each buffer's capacity; the counters keep counting) and count the pair as kept.
+    ``min(pair_counts[0], slots)``. For each: unless a supporting plane separates the triangles, find
+    its feature pairs that no plane separates and whose boxes overlap (as bit masks, each box loaded
+    once); if there are any, append them (written only below each buffer's capacity; the counters keep
+    counting) and count the pair as kept.
     ``pair_stats`` = [kept, kept within one object, all pairs within one object]."""
     # Arrays out of the struct once: on the CPU every struct member access copies the array header.
     faces = topology.faces
@@ -155,12 +174,25 @@ def _extract_features(
         same_object = planes.object_ids[a] == planes.object_ids[b]
         if same_object:
             wp.atomic_add(pair_stats, 2, 1)
-        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, a, b)
-        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, b, a)
+        tri_a = faces[a]
+        tri_b = faces[b]
+        # The supporting-plane test (pscc.collision.pair_filter), per vertex: the sides of b's vertices
+        # with respect to a's plane and of a's with respect to b's.
+        sides_b = plane_sides(tri_a, tri_b, planes.positions_t0, planes.positions_t1, planes.swept,
+                              planes.thickness, planes.factor, planes.params)
+        sides_a = plane_sides(tri_b, tri_a, planes.positions_t0, planes.positions_t1, planes.swept,
+                              planes.thickness, planes.factor, planes.params)
+        if sides_agree(sides_b) or sides_agree(sides_a):
+            continue
+        # A vertex certified beyond the other face's plane cannot come within the thickness of that face.
+        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, a, b) & _inside_bits(sides_a)
+        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, b, a) & _inside_bits(sides_b)
         vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
-        # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests.
-        bits_a = owned_edge_bits[a]
-        bits_b = owned_edge_bits[b]
+        # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests. An edge whose
+        # two ends are beyond the other face's plane on one side cannot come within the thickness of
+        # that face's edges (they lie in the plane).
+        bits_a = owned_edge_bits[a] & ~_beyond_edge_bits(sides_a)
+        bits_b = owned_edge_bits[b] & ~_beyond_edge_bits(sides_b)
         ids_a = face_edges[a]
         ids_b = face_edges[b]
         lower_b = wp.mat33(0.0)
@@ -197,9 +229,6 @@ def _extract_features(
             ee += (edge_mask >> t) & 1
         if vf + ee == 0:
             continue
-        if triangle_pair_separated(faces[a], faces[b], planes.positions_t0, planes.positions_t1, planes.swept,
-                                   planes.thickness, planes.factor, planes.params):
-            continue
         wp.atomic_add(pair_stats, 0, 1)
         if same_object:
             wp.atomic_add(pair_stats, 1, 1)
@@ -208,8 +237,6 @@ def _extract_features(
         if vf > 0:
             slot = wp.atomic_add(counts, 0, vf)
             capacity = vertex_face_out.shape[0]
-            tri_a = faces[a]
-            tri_b = faces[b]
             for k in range(3):
                 if (mask_ab >> k) & 1:
                     if slot < capacity:

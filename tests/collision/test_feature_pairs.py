@@ -12,7 +12,7 @@ from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs, ownership_bits
-from pscc.collision.pair_filter import _plane_separates_static
+from pscc.collision.pair_filter import _static_sides, sides_agree
 from pscc.mesh import MeshTopology, grid_sheet
 
 
@@ -117,8 +117,8 @@ def _separated(tris: wp.array(dtype=wp.vec3, ndim=2), thickness: wp.array(dtype=
     b0 = tris[i, 3]
     b1 = tris[i, 4]
     b2 = tris[i, 5]
-    out[i] = int(_plane_separates_static(a0, a1, a2, b0, b1, b2, h, factor)
-                 or _plane_separates_static(b0, b1, b2, a0, a1, a2, h, factor))
+    out[i] = int(sides_agree(_static_sides(a0, a1, a2, b0, b1, b2, h, factor))
+                 or sides_agree(_static_sides(b0, b1, b2, a0, a1, a2, h, factor)))
 
 
 def test_supporting_plane_test_against_float64() -> None:
@@ -156,3 +156,43 @@ def test_supporting_plane_test_against_float64() -> None:
     assert np.all(separated[clear])
     for i in np.flatnonzero(separated):
         assert _triangle_distance(t64[i, :3], t64[i, 3:]) > thickness[i], i
+
+
+def _close_feature_pairs(faces: np.ndarray, topology: MeshTopology, x: np.ndarray, h: float):
+    """Every vertex-face pair (vertex not on the face) and edge-edge pair (no shared vertex) whose
+    float64 ipctk distance is at most h."""
+    import ipctk
+
+    x = x.astype(np.float64)
+    vf = {(v, f) for f, tri in enumerate(faces) for v in range(x.shape[0])
+          if v not in tri and ipctk.point_triangle_distance(x[v], *x[tri]) <= h * h}
+    edges = topology.edges
+    ee = {(i, j) for i in range(len(edges)) for j in range(i + 1, len(edges))
+          if not set(edges[i]) & set(edges[j])
+          and ipctk.edge_edge_distance(*x[edges[i]], *x[edges[j]]) <= h * h}
+    return vf, ee
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_plane_sides_drop_no_close_feature_pair(seed: int) -> None:
+    """Two crumpled 4 x 4 sheets close to each other, all triangle pairs: the per-vertex supporting-plane
+    sides leave out only feature pairs farther than the thickness (float64 ipctk distances), and they
+    do leave some out."""
+    rng = np.random.default_rng(seed)
+    vertices, sheet, _ = grid_sheet(4, 4)
+    n = vertices.shape[0]
+    top = vertices + np.array([0.05, 0.03, 0.08]) + rng.normal(0, 0.04, vertices.shape)
+    bottom = vertices + rng.normal(0, 0.04, vertices.shape)
+    x = np.concatenate([bottom, top]).astype(np.float32)
+    faces = np.concatenate([sheet, sheet + n]).astype(np.int32)
+    h = 0.06
+    topology, vf, ee = _extract(faces, 2 * n, _all_pairs(len(faces)), positions=x, thickness=h)
+    got_vf = {tuple(int(v) for v in r) for r in vf}
+    got_ee = {tuple(sorted(int(v) for v in r)) for r in ee}
+    close_vf, close_ee = _close_feature_pairs(faces, topology, x, h)
+    assert close_vf <= got_vf and close_ee <= got_ee
+    assert len(close_vf) + len(close_ee) > 0
+    total_ee = sum(1 for i in range(len(topology.edges)) for j in range(i + 1, len(topology.edges))
+                   if not set(topology.edges[i]) & set(topology.edges[j]))
+    assert len(got_ee) < total_ee
