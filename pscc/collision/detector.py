@@ -268,14 +268,18 @@ class CollisionDetector:
         self._inputs(positions, None, 0.0)
 
     def state_dict(self) -> dict[str, np.ndarray]:
-        """The state a detector carries between calls: the ``pscc`` test front (empty otherwise).
+        """The state a detector carries between calls: the ``pscc`` test front and the spatial hash's
+        group slab policy (empty for other methods).
 
         Restoring it (:meth:`load_state_dict`) into a detector over the same mesh makes later calls
-        return exactly what this one's would. Call :meth:`prepare` or a detection first.
+        return exactly what this one's would (the slab policy decides which triangle pairs reach the
+        narrow phase, and so the order of the contacts). Call :meth:`prepare` or a detection first.
         """
         if self.front is None:
             return {}
-        return {f"front_{key}": value for key, value in self.front.state_dict().items()}
+        state = {f"front_{key}": value for key, value in self.front.state_dict().items()}
+        state["hash_slab_policy"] = self.spatial_hash.slab_policy.numpy().astype(np.int32)
+        return state
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Restore :meth:`state_dict` output; the detector must be prepared (:meth:`prepare`).
@@ -289,6 +293,12 @@ class CollisionDetector:
                              "call prepare(positions) before load_state_dict()")
         if self.front is not None and front_state:
             self.front.load_state_dict(front_state)
+        if self.front is not None and "hash_slab_policy" in state:  # absent from older checkpoints
+            policy = np.asarray(state["hash_slab_policy"]).reshape(-1)
+            if policy.shape != (2,) or policy[0] not in (0, 1) or policy[1] < 0:
+                raise InputError("checkpoint", "hash_slab_policy", f"{policy.tolist()} is not [0 or 1, calls >= 0]",
+                                 "restore a checkpoint written by this version of pscc")
+            self.spatial_hash.slab_policy.assign(policy.astype(np.int32))
 
     def broad_phase(self, positions: Any, positions_end: Any = None,
                     thickness: float = 0.0) -> dict[str, Any] | None:

@@ -437,3 +437,32 @@ def test_slab_policy_is_not_stepped_by_a_call_that_overflowed() -> None:
     assert hash_.stats.reruns > 0
     assert hash_.stats.slab_tests > 0
     assert hash_.slab_policy.numpy()[0] == 0  # and the completed call turned it off
+
+
+def test_detector_checkpoint_keeps_the_slab_policy() -> None:
+    """The detector's state_dict carries the slab policy: a detector restored from it makes the same
+    choices on its next calls (here: the probe after SLAB_PROBE_INTERVAL calls without the test comes on
+    the same call), so it hands the narrow phase the same pairs; a bad policy is refused."""
+    from pscc.collision.spatial_hash_settings import SLAB_PROBE_INTERVAL
+
+    x, faces, _ = _tilted_plates(0.0015)
+    first = CollisionDetector(faces, device="cpu")
+    for _ in range(3):
+        first.detect(x, thickness=0.01)
+    state = first.state_dict()
+    assert state["hash_slab_policy"][0] == 0  # the test did not pay
+    second = CollisionDetector(faces, device="cpu")
+    second.detect(x, thickness=0.01)  # sizes its buffers (a call the restore then overrides)
+    second.load_state_dict(state)
+    tests = []
+    for _ in range(SLAB_PROBE_INTERVAL):
+        a = first.detect(x, thickness=0.01)
+        b = second.detect(x, thickness=0.01)
+        tests.append((a.stats["grid"]["slab_tests"], b.stats["grid"]["slab_tests"]))
+        assert a.stats["triangle_pairs"] == b.stats["triangle_pairs"]
+        np.testing.assert_array_equal(a.vertex_face, b.vertex_face)
+        np.testing.assert_array_equal(a.edge_edge, b.edge_edge)
+    assert all(ta == tb for ta, tb in tests)
+    assert sum(1 for ta, _ in tests if ta > 0) == 1  # one probe
+    with pytest.raises(InputError, match="hash_slab_policy"):
+        second.load_state_dict({**state, "hash_slab_policy": np.array([2, 0])})
