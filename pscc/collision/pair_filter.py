@@ -72,7 +72,7 @@ def plane_sides(
     A vertex with a non-zero side is farther than the thickness from every point of face ``fa``, and
     an edge of ``fb`` whose two ends have the same non-zero side is farther than it from every edge of
     ``fa`` (they lie in the plane): :mod:`pscc.collision.feature_pairs` drops those feature pairs, and
-    the triangle pair when all three sides agree (:func:`triangle_pair_separated`)."""
+    the triangle pair when all three sides agree (:func:`sides_agree`)."""
     if swept == 0:
         return _static_sides(positions_t0[fa[0]], positions_t0[fa[1]], positions_t0[fa[2]], positions_t0[fb[0]],
                              positions_t0[fb[1]], positions_t0[fb[2]], thickness, factor)
@@ -95,24 +95,3 @@ def plane_sides(
 def sides_agree(sides: wp.vec3) -> bool:
     """All three sides are the same non-zero side: the plane separates the face."""
     return sides[0] != 0.0 and sides[0] == sides[1] and sides[1] == sides[2]
-
-
-@wp.func
-def triangle_pair_separated(
-    fa: wp.vec3i,
-    fb: wp.vec3i,
-    positions_t0: wp.array(dtype=wp.vec3),
-    positions_t1: wp.array(dtype=wp.vec3),
-    swept: int,
-    thickness: float,
-    factor: float,
-    params: CcdParameters,
-) -> bool:
-    """True when a supporting plane of face ``fa`` or ``fb`` separates the two (module docstring).
-
-    ``swept`` = 0: static test at ``positions_t0`` with the thickness; 1: over the step (only with
-    thickness 0; with a thickness the pair is never separated).
-    """
-    if sides_agree(plane_sides(fa, fb, positions_t0, positions_t1, swept, thickness, factor, params)):
-        return True
-    return sides_agree(plane_sides(fb, fa, positions_t0, positions_t1, swept, thickness, factor, params))
