@@ -51,6 +51,10 @@ group_skip                 (S,) vec3i            slab test only: largest later g
                                                  next later groups large enough to be slab-tested with a
                                                  group of one / two entries (lets the row plan pass
                                                  groups too small to slab-test in O(1))
+group_sphere               (S,) vec4             slab test only: centre and radius bounding group g's
+                                                 vertices (the O(1) bound of the slab test)
+slab_policy                (2,) int32            kept across calls: [this call slab-tests, calls since
+                                                 the last one that did] (docs/spatial-hash.md §3a)
 row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
 row_span                   (R,) vec3i            work row r = (g, b_start, b_end): entries of group g
                                                  against entries [b_start, b_end) of its cell
@@ -59,8 +63,8 @@ row_work / row_scan        (R,) int64            BV tests of row r = n_g x (b_en
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
                                                  (P slots and no keys when ``sort_pairs`` is off)
 counts                     (2,) int64            [pairs emitted (keeps counting past P), unused]
-info                       (18,) int64           device counters (``_spatial_hash_kernels.INFO_*``)
-summary                    (23,) float64         the counters, dims, cell size and pair count, read at once
+info                       (19,) int64           device counters (``_spatial_hash_kernels.INFO_*``)
+summary                    (24,) float64         the counters, dims, cell size and pair count, read at once
 =========================  ====================  ===========================================================
 
 Two paths. :meth:`SpatialHash.find_pairs_device` reads nothing back, synchronizes nothing and allocates
@@ -71,24 +75,24 @@ stage stops, the true count is kept, and :meth:`SpatialHash.check_capacity` (the
 read of ``summary``) raises deferred input errors, grows what overflowed and says whether to run
 again. :meth:`SpatialHash.find_pairs` is both, repeated until the buffers fit.
 
-The defaults, buffer limits and :class:`SpatialHashStats` live in
+The input checks and the kernels' argument structs are in :mod:`pscc.collision.hash_arguments`; the
+defaults, buffer limits and :class:`SpatialHashStats` live in
 :mod:`pscc.collision.spatial_hash_settings` (re-exported here); the kernels in
 :mod:`pscc.collision._spatial_hash_kernels` and :mod:`pscc.collision._hash_row_kernels`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 import warp as wp
 
-from pscc import tolerances
 from pscc._reductions import PrefixSum
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision import shared_vertex
+from pscc.collision.hash_arguments import check_face_array, diagonal_args, shared_args, slab_args
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
@@ -252,15 +256,17 @@ class SpatialHash:
         self.tests_per_launch = tests_per_launch
         self.skip_adjacent = bool(skip_adjacent)
         m = self.face_count
-        self._vertex_bound = 0
-        self._faces_given = faces is not None
+        self.vertex_bound = 0
+        """One past the largest vertex id of ``faces`` (0 without faces): positions must cover it."""
+        self.faces_given = faces is not None
+        """Whether the caller gave ``faces`` (the slab test and ``certify_shared`` need them)."""
         if faces is not None:
-            self._check_array(faces, "faces", wp.vec3i)
+            check_face_array(faces, "faces", wp.vec3i, self.face_count, self.device)
             self.faces = faces  # the caller's (not counted in device_bytes)
             if m > 0:
                 # The slab test and the certificate read positions[faces]: one host read here lets
                 # every call check them.
-                self._vertex_bound = int(faces.numpy().max()) + 1
+                self.vertex_bound = int(faces.numpy().max()) + 1
         elif self.skip_adjacent or self.group_slab_test:
             option = "skip_adjacent" if self.skip_adjacent else "group_slab_test"
             raise InputError("argument", "faces", f"{option}=True needs the faces' vertex ids",
@@ -434,24 +440,8 @@ class SpatialHash:
                  "row_work",
                  "row_scan", "pairs", "pair_keys")
         # Tables in a lent buffer (lend_scratch) and faces passed in are the caller's memory: counted as 0.
-        borrowed = self._lent_names | ({"faces"} if self._faces_given else set())
+        borrowed = self._lent_names | ({"faces"} if self.faces_given else set())
         return {name: 0 if name in borrowed else int(getattr(self, name).capacity) for name in names}
-
-    # ------------------------------------------------------------------ validation
-
-    def _check_array(self, value: object, name: str, dtype: type) -> None:
-        m = self.face_count
-        if not isinstance(value, wp.array):
-            raise InputError("argument", name, f"got {type(value).__name__}, not a wp.array",
-                             f"pass a ({m},) wp.array of {dtype.__name__}")
-        if value.dtype != dtype or value.ndim != 1 or value.shape[0] != m:
-            raise InputError("argument", name, f"got a {value.shape} array of {wp.types.type_repr(value.dtype)}",
-                             f"pass a ({m},) wp.array of {dtype.__name__}")
-        if value.device != self.device:
-            raise InputError("argument", name, f"array is on {value.device}, the hash on {self.device}",
-                             f"copy it to {self.device} first")
-        if not value.is_contiguous:
-            raise InputError("argument", name, "array is not contiguous", "pass a contiguous array")
 
     # ------------------------------------------------------------------ public API
 
@@ -591,14 +581,14 @@ class SpatialHash:
         call: :meth:`refresh_loans`). Capture-safe: yes (with the arrays of the recorded call; after
         :meth:`check_capacity` grows a buffer or a lender's buffers change, record again).
         """
-        self._check_array(face_lower, "face_lower", wp.vec3)
-        self._check_array(face_upper, "face_upper", wp.vec3)
+        check_face_array(face_lower, "face_lower", wp.vec3, self.face_count, self.device)
+        check_face_array(face_upper, "face_upper", wp.vec3, self.face_count, self.device)
         own_nodes = node_id is None
         if own_nodes:
             node_id = self.own_node_id
             node_id_bound = max(1, self.face_count)
         else:
-            self._check_array(node_id, "node_id", wp.int32)
+            check_face_array(node_id, "node_id", wp.int32, self.face_count, self.device)
         if node_id_bound is not None and (isinstance(node_id_bound, bool)
                                           or not isinstance(node_id_bound, int | np.integer)
                                           or not 1 <= node_id_bound <= 2**31):
@@ -606,10 +596,11 @@ class SpatialHash:
                              "pass one more than the largest node id, or None")
         fixed_cell_size = 0.0 if cell_size is None else check_positive(cell_size, "cell_size")
         if face_order is not None:
-            self._check_array(face_order, "face_order", wp.int32)
-        diagonals = self._diagonal_args(face_diagonal_lower, face_diagonal_upper)
-        slab, half = self._slab_args(not own_nodes, positions_t0, positions_t1, half_distance)
-        shared = self._shared_args(bool(certify_shared), positions_t0, positions_t1)
+            check_face_array(face_order, "face_order", wp.int32, self.face_count, self.device)
+        diagonals = diagonal_args(face_diagonal_lower, face_diagonal_upper, self._no_diagonals, self.face_count,
+                                  self.device)
+        slab, half = slab_args(self, not own_nodes, positions_t0, positions_t1, half_distance)
+        shared = shared_args(self, bool(certify_shared), positions_t0, positions_t1)
         node_bits = kernels.NODE_BITS if node_id_bound is None else max(1, (int(node_id_bound) - 1).bit_length())
         node_limit = 0 if node_id_bound is None else int(node_id_bound)
         self._last_call = (face_order is not None, node_limit)
@@ -795,75 +786,6 @@ class SpatialHash:
         stats.device_bytes = self.device_bytes
         self.stats = stats
 
-    def _slab_args(self, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
-                   half_distance: float) -> tuple[kernels.SlabArgs, float]:
-        """The slab test's launch arguments (disabled unless configured and given node ids) and the
-        half distance as the float32 value the margin is computed from."""
-        slab = kernels.SlabArgs()
-        slab.enabled = 0
-        slab.faces = self.faces
-        slab.swept = 0
-        slab.min_work = self.slab_min_work
-        slab.exact_min_work = self.slab_exact_min_work
-        slab.group_skip = self.group_skip
-        slab.group_sphere = self.group_sphere
-        slab.policy = self.slab_policy
-        if not (self.group_slab_test and grouped):
-            slab.positions_t0 = slab.positions_t1 = self.chunk_lower
-            return slab, 0.0
-        self._check_positions(positions_t0, positions_t1, "the group slab test", "with node_id")
-        half = float(half_distance)
-        if not math.isfinite(half) or half < 0.0:
-            raise InputError("argument", "half_distance", f"{half_distance!r} is not a finite number >= 0",
-                             "pass the half distance the boxes were grown by")
-        slab.enabled = 1
-        slab.positions_t0 = positions_t0
-        slab.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
-        slab.swept = 0 if positions_t1 is None else 1
-        return slab, float(np.float32(half))
-
-    def _shared_args(self, certify: bool, positions_t0: wp.array | None,
-                     positions_t1: wp.array | None) -> shared_vertex.SharedVertexArgs:
-        """The face test's arguments for pairs that share a vertex (``skip_adjacent``, ``certify_shared``)."""
-        args = shared_vertex.SharedVertexArgs()
-        args.faces = self.faces
-        args.mode = shared_vertex.SHARED_SKIP if self.skip_adjacent else shared_vertex.SHARED_KEEP
-        args.swept = 0
-        args.positions_t0 = args.positions_t1 = self.chunk_lower
-        args.margin = tolerances.NORMAL_CONE_MARGIN
-        if certify:
-            if not self._faces_given or self.skip_adjacent:
-                raise InputError("argument", "certify_shared", "this hash has no faces or skips every pair "
-                                 "that shares a vertex", "construct it with faces= and without skip_adjacent")
-            self._check_positions(positions_t0, positions_t1, "certify_shared", "on every call")
-            args.mode = shared_vertex.SHARED_CERTIFY
-            args.positions_t0 = positions_t0
-            args.positions_t1 = positions_t0 if positions_t1 is None else positions_t1
-            args.swept = 0 if positions_t1 is None else 1
-        return args
-
-    def _check_positions(self, positions_t0: wp.array | None, positions_t1: wp.array | None, user: str,
-                         when: str) -> None:
-        """Vertex positions that ``user`` reads: vec3 arrays on this device covering the faces' vertices."""
-        for name, value in (("positions_t0", positions_t0), ("positions_t1", positions_t1)):
-            if value is None:
-                if name == "positions_t0":
-                    raise InputError("argument", name, f"{user} needs the vertex positions",
-                                     f"pass positions_t0 (and positions_t1 for CCD) {when}")
-                continue
-            if not isinstance(value, wp.array) or value.dtype != wp.vec3 or value.ndim != 1:
-                raise InputError("argument", name, f"got {type(value).__name__}, not a 1-D wp.array of vec3",
-                                 "pass the (vertex_count,) wp.vec3 positions the boxes were built from")
-            if value.device != self.device:
-                raise InputError("argument", name, f"array is on {value.device}, the hash on {self.device}",
-                                 f"copy it to {self.device} first")
-        if positions_t0.shape[0] < self._vertex_bound:
-            raise InputError("argument", "positions_t0", f"{positions_t0.shape[0]} positions, but the faces use "
-                             f"{self._vertex_bound} vertices", "pass a position for every vertex the faces use")
-        if positions_t1 is not None and positions_t1.shape != positions_t0.shape:
-            raise InputError("argument", "positions_t1", f"shape {positions_t1.shape} != positions_t0's "
-                             f"{positions_t0.shape}", "pass both ends of the step for the same vertices")
-
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when
         ``sort_pairs``.
@@ -969,24 +891,6 @@ class SpatialHash:
         wp.launch(row_kernels._write_entry_codes, dim=n,
                   inputs=[self.entry_key, self.entry_face, face_lower, face_upper, self.grid, node_bits, self.info],
                   outputs=[self.entry_code], device=dev)
-
-    def _diagonal_args(self, lower: wp.array | None, upper: wp.array | None) -> kernels.DiagonalArgs:
-        """The face test's diagonal slabs, checked (both arrays or neither)."""
-        args = kernels.DiagonalArgs()
-        if lower is None and upper is None:
-            args.lower = self._no_diagonals
-            args.upper = self._no_diagonals
-            args.enabled = 0
-            return args
-        if lower is None or upper is None:
-            raise InputError("argument", "face_diagonal_lower/face_diagonal_upper", "only one of the two was given",
-                             "pass both (PrimitiveBoxes(face_diagonals=True) fills them) or neither")
-        self._check_array(lower, "face_diagonal_lower", vec10)
-        self._check_array(upper, "face_diagonal_upper", vec10)
-        args.lower = lower
-        args.upper = upper
-        args.enabled = 1
-        return args
 
     def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, diagonals: kernels.DiagonalArgs,
                     shared: shared_vertex.SharedVertexArgs, node_bits: int) -> None:
