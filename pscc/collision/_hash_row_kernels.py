@@ -154,19 +154,13 @@ def _compute_group_slabs(
     lower = wp.vec3(wp.inf, wp.inf, wp.inf)
     upper = wp.vec3(-wp.inf, -wp.inf, -wp.inf)
     faces = slab.faces
-    x0 = slab.positions_t0
-    x1 = slab.positions_t1
     for e in range(start, end):
         tri = faces[entry_face[e]]
         for v in range(3):
-            p = x0[tri[v]]
-            s = wp.dot(axis, p)
-            lo = wp.min(lo, s)
-            hi = wp.max(hi, s)
-            lower = wp.min(lower, p)
-            upper = wp.max(upper, p)
-            if slab.swept != 0:
-                p = x1[tri[v]]
+            for step_end in range(1 + int(slab.swept != 0)):
+                p = slab.positions_t0[tri[v]]
+                if step_end == 1:
+                    p = slab.positions_t1[tri[v]]
                 s = wp.dot(axis, p)
                 lo = wp.min(lo, s)
                 hi = wp.max(hi, s)

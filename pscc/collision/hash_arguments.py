@@ -9,6 +9,7 @@ member cannot be ``None``). Host only: nothing here launches a kernel or reads t
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -18,6 +19,9 @@ from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision import shared_vertex
 from pscc.errors import InputError
 from pscc.geometry.dop import vec10
+
+if TYPE_CHECKING:
+    from pscc.collision.spatial_hash import SpatialHash
 
 __all__ = ["check_face_array", "check_positions", "diagonal_args", "shared_args", "slab_args"]
 
@@ -81,9 +85,9 @@ def diagonal_args(lower: wp.array | None, upper: wp.array | None, empty: wp.arra
     return args
 
 
-def slab_args(hash_: object, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
+def slab_args(hash_: SpatialHash, grouped: bool, positions_t0: wp.array | None, positions_t1: wp.array | None,
               half_distance: float) -> tuple[kernels.SlabArgs, float]:
-    """The group slab test's launch arguments for ``hash_`` (a :class:`SpatialHash`; disabled unless it is
+    """The group slab test's launch arguments for ``hash_`` (disabled unless it is
     configured and the call has node ids) and the half distance as the float32 value the margin is
     computed from."""
     slab = kernels.SlabArgs()
@@ -111,7 +115,7 @@ def slab_args(hash_: object, grouped: bool, positions_t0: wp.array | None, posit
     return slab, float(np.float32(half))
 
 
-def shared_args(hash_: object, certify: bool, positions_t0: wp.array | None,
+def shared_args(hash_: SpatialHash, certify: bool, positions_t0: wp.array | None,
                 positions_t1: wp.array | None) -> shared_vertex.SharedVertexArgs:
     """The face test's arguments for pairs that share a vertex (``skip_adjacent``, ``certify_shared``)."""
     args = shared_vertex.SharedVertexArgs()

@@ -104,6 +104,17 @@ def _codes(cells, la, ua, lb, ub, grid) -> np.ndarray:
     return out.numpy()
 
 
+def _box_pairs(rng, n: int, offset: float, cell_size: float, first_cell: int, ends):
+    """n samples of two boxes around a cell (coordinates in [first_cell, 6) per axis) of a grid at
+    ``offset``: each box end is ``ends()`` cells from the cell's corner. Returns (origin, cells, lower
+    and upper of box a, lower and upper of box b), float32."""
+    origin = np.float32(offset) + rng.normal(size=3).astype(np.float32)
+    cells = rng.integers(first_cell, 6, size=(n, 3))
+    base = origin + cells * np.float32(cell_size)
+    p, q, r, s = ((base + ends() * cell_size).astype(np.float32) for _ in range(4))
+    return origin, cells, np.minimum(p, q), np.maximum(p, q), np.minimum(r, s), np.maximum(r, s)
+
+
 def _overlap(la, ua, lb, ub) -> np.ndarray:
     """The hash's float32 closed-box test."""
     return np.all((la <= ub) & (lb <= ua), axis=1)
@@ -113,24 +124,20 @@ def _overlap(la, ua, lb, ub) -> np.ndarray:
 @given(seed=st.integers(0, 2**31 - 1), offset=st.sampled_from([0.0, 3.0, -250.0, 1e5]),
        cell_size=st.sampled_from([1.0, 0.37, 1e-3, 40.0]))
 def test_codes_never_reject_overlapping_boxes(seed: int, offset: float, cell_size: float) -> None:
-    """Random boxes around one cell, with ends on the cell's sixteenths, on its faces, shared by both
+    """Random boxes around one cell, with ends on the cell's fifteenths (the codes' steps), on its faces, shared by both
     boxes (touching) and zero-size boxes: whenever the float32 boxes overlap, so do their codes, in
     the cell of the sample (any cell: the argument is monotonicity, not which cell emits)."""
     rng = np.random.default_rng(seed)
     n = 4000
-    origin = np.float32(offset) + rng.normal(size=3).astype(np.float32)
-    cells = rng.integers(0, 6, size=(n, 3))
-    base = origin + cells * np.float32(cell_size)
+
     def ends() -> np.ndarray:
         kind = rng.integers(0, 4, size=(n, 3))
         free = rng.uniform(-0.5, 1.5, size=(n, 3))
-        sixteenth = rng.integers(-2, 19, size=(n, 3)) / 16.0
+        fifteenth = rng.integers(-2, 18, size=(n, 3)) / 15.0
         face = rng.integers(0, 2, size=(n, 3)).astype(np.float64)
-        t = np.where(kind == 0, free, np.where(kind == 1, sixteenth, np.where(kind == 2, face, free * 1e-3)))
-        return (base + t * cell_size).astype(np.float32)
-    p, q, r, s = ends(), ends(), ends(), ends()
-    la, ua = np.minimum(p, q), np.maximum(p, q)
-    lb, ub = np.minimum(r, s), np.maximum(r, s)
+        return np.where(kind == 0, free, np.where(kind == 1, fifteenth, np.where(kind == 2, face, free * 1e-3)))
+
+    origin, cells, la, ua, lb, ub = _box_pairs(rng, n, offset, cell_size, 0, ends)
     # Touching boxes: b starts exactly where a ends on one axis; point boxes.
     touch = rng.random(n) < 0.25
     axis = rng.integers(0, 3, size=n)
@@ -155,18 +162,15 @@ def test_codes_hold_the_token_exactly_where_the_boxes_do(seed: int, offset: floa
     faces and far from the origin."""
     rng = np.random.default_rng(seed)
     n = 4000
-    origin = np.float32(offset) + rng.normal(size=3).astype(np.float32)
-    cells = rng.integers(1, 6, size=(n, 3))
-    base = origin + cells * np.float32(cell_size)
+
     def ends() -> np.ndarray:
         kind = rng.integers(0, 3, size=(n, 3))
         free = rng.uniform(-1.5, 2.5, size=(n, 3))
         face = rng.integers(-1, 3, size=(n, 3)).astype(np.float64)
         near_face = face + rng.choice([-1.0, 1.0], size=(n, 3)) * 1e-7
-        return (base + np.where(kind == 0, free, np.where(kind == 1, face, near_face)) * cell_size).astype(np.float32)
-    p, q, r, s = ends(), ends(), ends(), ends()
-    la, ua = np.minimum(p, q), np.maximum(p, q)
-    lb, ub = np.minimum(r, s), np.maximum(r, s)
+        return np.where(kind == 0, free, np.where(kind == 1, face, near_face))
+
+    origin, cells, la, ua, lb, ub = _box_pairs(rng, n, offset, cell_size, 1, ends)
     out = wp.zeros(n, dtype=wp.int32, device=DEVICE)
     arrays = [wp.array(v, dtype=wp.vec3, device=DEVICE) for v in (la, ua, lb, ub)]
     wp.launch(_token_rules, dim=n, device=DEVICE,
@@ -182,7 +186,7 @@ def test_codes_hold_the_token_exactly_where_the_boxes_do(seed: int, offset: floa
 
 
 def test_codes_reject_boxes_apart_within_the_cell() -> None:
-    """Two boxes inside one cell, apart by more than a sixteenth on one axis, are rejected; the same
+    """Two boxes inside one cell, apart by more than a fifteenth on one axis, are rejected; the same
     boxes shifted to touch are kept."""
     n = 300
     rng = np.random.default_rng(2)

@@ -177,8 +177,7 @@ def _close_feature_pairs(faces: np.ndarray, topology: MeshTopology, x: np.ndarra
 @given(seed=st.integers(0, 2**31 - 1))
 def test_plane_sides_drop_no_close_feature_pair(seed: int) -> None:
     """Two crumpled 4 x 4 sheets close to each other, all triangle pairs: the per-vertex supporting-plane
-    sides leave out only feature pairs farther than the thickness (float64 ipctk distances), and they
-    do leave some out."""
+    sides leave out only feature pairs farther than the thickness (float64 ipctk distances)."""
     rng = np.random.default_rng(seed)
     vertices, sheet, _ = grid_sheet(4, 4)
     n = vertices.shape[0]
@@ -193,6 +192,23 @@ def test_plane_sides_drop_no_close_feature_pair(seed: int) -> None:
     close_vf, close_ee = _close_feature_pairs(faces, topology, x, h)
     assert close_vf <= got_vf and close_ee <= got_ee
     assert len(close_vf) + len(close_ee) > 0
-    total_ee = sum(1 for i in range(len(topology.edges)) for j in range(i + 1, len(topology.edges))
-                   if not set(topology.edges[i]) & set(topology.edges[j]))
-    assert len(got_ee) < total_ee
+
+
+def test_plane_sides_leave_out_the_features_beyond_the_plane() -> None:
+    """Triangle A tilted 45 degrees (plane x = z, so its box is a unit cube); triangle B touches A's plane
+    at one vertex and has the other two inside A's box but 0.42 below its plane (thickness 0.1): the
+    pair is kept, the near vertex against A is a candidate, and the two far vertices against A and
+    the far edge against A's edges, whose boxes all overlap, are not."""
+    x = np.array([[0, 0, 0], [1, 0, 1], [0, 1, 0], [0.3, 0.3, 0.35], [0.2, 0.3, 0.8], [0.3, 0.2, 0.9]],
+                 np.float32)
+    faces = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    topology, vf, ee = _extract(faces, 6, np.array([[0, 1]]), positions=x, thickness=0.1)
+    got_vf = {tuple(int(v) for v in r) for r in vf}
+    assert (3, 0) in got_vf
+    assert (4, 0) not in got_vf and (5, 0) not in got_vf
+    far_edge = int(np.flatnonzero([set(e.tolist()) == {4, 5} for e in topology.edges])[0])
+    assert all(far_edge not in (int(a), int(b)) for a, b in ee)
+    # With a thickness past the far vertices' distance, the same pair keeps them (their boxes overlap).
+    _, vf_thick, ee_thick = _extract(faces, 6, np.array([[0, 1]]), positions=x, thickness=2.5)
+    assert {(4, 0), (5, 0)} <= {tuple(int(v) for v in r) for r in vf_thick}
+    assert any(far_edge in (int(a), int(b)) for a, b in ee_thick)
