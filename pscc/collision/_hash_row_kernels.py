@@ -619,6 +619,25 @@ def _write_entry_codes(
 
 
 @wp.func
+def face_pair_kept(fa: int, fb: int, diagonals: DiagonalArgs, shared: SharedVertexArgs) -> bool:
+    """The tests of a face pair after its boxes overlap: a shared vertex (``shared.mode`` skip), the
+    diagonal slabs (``diagonals.enabled``), then the shared-vertex certificate (``shared.mode`` certify)."""
+    if shared.mode == SHARED_SKIP:
+        if shares_vertex(shared.faces[fa], shared.faces[fb]):
+            return False
+    if diagonals.enabled != 0:
+        if not diagonal_slabs_overlap(diagonals.lower[fa], diagonals.upper[fa], diagonals.lower[fb],
+                                      diagonals.upper[fb]):
+            return False
+    if shared.mode == SHARED_CERTIFY:
+        ta = shared.faces[fa]
+        tb = shared.faces[fb]
+        if shares_vertex(ta, tb):
+            return not certified_in(shared.positions_t0, shared.positions_t1, shared.swept, shared.margin, ta, tb)
+    return True
+
+
+@wp.func
 def _find_row(row_scan: wp.array(dtype=wp.int64), row_count: int, k: wp.int64) -> int:
     """First row r with row_scan[r] > k (row_scan is the inclusive scan of the row work)."""
     lo = int(0)
@@ -679,15 +698,6 @@ def _test_bounding_volumes(
     row_scan = tables.row_scan
     entry_code = tables.entry_code
     use_codes = info[_CELL_CODES] != wp.int64(0)
-    use_diagonals = diagonals.enabled
-    shared_mode = shared.mode
-    faces = shared.faces
-    shared_x0 = shared.positions_t0
-    shared_x1 = shared.positions_t1
-    shared_swept = shared.swept
-    shared_margin = shared.margin
-    diagonal_lower = diagonals.lower
-    diagonal_upper = diagonals.upper
     r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
     q = k - (row_scan[r] - row_work[r])
     # Per-row values, reloaded only when the walk enters the next row. The test (a, b) of row r at
@@ -734,16 +744,8 @@ def _test_bounding_volumes(
                 # Token position: only the cell holding the lower corner of the boxes' intersection emits.
                 token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
                 emit = linear_cell_id(token, state.dims) == row_cell
-            if emit and shared_mode == SHARED_SKIP:
-                emit = not shares_vertex(faces[fa], faces[fb])
-            if emit and use_diagonals != 0:
-                emit = diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa],
-                                              diagonal_lower[fb], diagonal_upper[fb])
-            if emit and shared_mode == SHARED_CERTIFY:
-                ta = faces[fa]
-                tb = faces[fb]
-                if shares_vertex(ta, tb):
-                    emit = not certified_in(shared_x0, shared_x1, shared_swept, shared_margin, ta, tb)
+            if emit:
+                emit = face_pair_kept(fa, fb, diagonals, shared)
             if emit:
                 slot = wp.atomic_add(counts, 0, wp.int64(1))
                 if slot < capacity:

@@ -12,6 +12,7 @@ kernel                                   one thread per
 ``_reduce_scene_chunks``                 chunk of faces (min corner, max corner, axis-length sum)
 ``_reduce_scene_total``                  (single thread) the whole scene, in a fixed order
 ``_clear_marks`` ... ``_check_marks``    face (``face_order`` only): each face must be listed once
+(:mod:`pscc.collision._wide_face_kernels`)  the wide faces and the scene without them
 ``_plan_grid``                           (single thread) origin, slab margin, first cell size; starts
                                          the grid loop unless the input is bad
 ``_count_face_cells``                    face (grid loop body): cells its box overlaps, grid extent
@@ -22,6 +23,7 @@ kernel                                   one thread per
 ``_mark_runs`` / ``_write_tables``       entry slot: head flags / group ranges, group cell, cell ends
 ``_gather_table_info``                   (single thread) group and cell counts
 (:mod:`pscc.collision._hash_row_kernels`)  group slab test, work rows and the test pass
+(:mod:`pscc.collision._wide_face_kernels`)  every face against the wide faces
 ``_compute_pair_keys``                   pair slot: sort key a * face_count + b (unused: largest)
 ``_gather_summary``                      (single thread) every counter in one float64 array
 =======================================  =============================================================
@@ -67,12 +69,18 @@ INFO_LIVE_TESTS: int = 15  # BV tests the test pass runs
 INFO_TEST_CHUNK: int = 16  # BV tests per test thread (a contiguous chunk each)
 INFO_CELL_CODES: int = 17  # 1: the test pass reads the entries' cell codes (enough BV tests per entry)
 INFO_SLAB_SAVED: int = 18  # face tests of the group pairs the slab test separated
-INFO_SIZE: int = 19
-"""Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size and the pairs emitted."""
+INFO_WIDE_FOUND: int = 19  # faces wide at the round's cell (:mod:`pscc.collision._wide_face_kernels`)
+INFO_WIDE_FACES: int = 20  # wide faces left out of the grid (0: none this call)
+INFO_WIDE_LISTED: int = 21  # wide faces listed (counter of ``_list_wide_faces``)
+INFO_WIDE_TESTS: int = 22  # face box tests against the wide faces
+INFO_SIZE: int = 23
+"""Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size, the pairs emitted and
+the wide cell."""
 SUMMARY_DIMS: int = INFO_SIZE
 SUMMARY_CELL_SIZE: int = INFO_SIZE + 3
 SUMMARY_PAIRS: int = INFO_SIZE + 4
-SUMMARY_SIZE: int = INFO_SIZE + 5
+SUMMARY_WIDE_CELL: int = INFO_SIZE + 5
+SUMMARY_SIZE: int = INFO_SIZE + 6
 
 _MASK_BITS = wp.constant(MASK_BITS)
 _MAX_GRID_CELLS = wp.constant(wp.int64(MAX_GRID_CELLS))
@@ -98,6 +106,10 @@ _LIVE_TESTS = wp.constant(INFO_LIVE_TESTS)
 _TEST_CHUNK = wp.constant(INFO_TEST_CHUNK)
 _CELL_CODES = wp.constant(INFO_CELL_CODES)
 _SLAB_SAVED = wp.constant(INFO_SLAB_SAVED)
+_WIDE_FOUND = wp.constant(INFO_WIDE_FOUND)
+_WIDE_FACES = wp.constant(INFO_WIDE_FACES)
+_WIDE_LISTED = wp.constant(INFO_WIDE_LISTED)
+_WIDE_TESTS = wp.constant(INFO_WIDE_TESTS)
 _INFO_SIZE = wp.constant(INFO_SIZE)
 
 
@@ -105,13 +117,17 @@ _INFO_SIZE = wp.constant(INFO_SIZE)
 class GridState:
     """The grid of the current call, written on the device: cell of p = floor((p - origin) /
     cell_size) per axis, ``dims`` cells per axis; ``margin`` grows each end of a group slab, and
-    ``bound_pad`` the bound of the smaller group in a group slab test (the rounding of that bound)."""
+    ``bound_pad`` the bound of the smaller group in a group slab test (the rounding of that bound);
+    a face is wide (left out of the grid) when its box covers more than ``wide_limit`` cells of edge
+    ``wide_cell`` (0: no wide faces this call; :mod:`pscc.collision._wide_face_kernels`)."""
 
     origin: wp.vec3
     cell_size: float
     dims: wp.vec3i
     margin: float
     bound_pad: float
+    wide_cell: wp.float64
+    wide_limit: wp.float64
 
 
 @wp.struct
@@ -201,6 +217,24 @@ def key_cell(key: wp.int64, node_bits: int) -> wp.int64:
     return key >> wp.int64(node_bits)
 
 
+@wp.func
+def box_cell_volume(lower: wp.vec3, upper: wp.vec3, cell: wp.float64) -> wp.float64:
+    """prod_k (e_k / cell + 1), e = upper - lower in float64: a bound, independent of the grid's origin, of
+    the cells of edge ``cell`` that the box overlaps (it overlaps at most floor(e_k / cell) + 2 per axis)."""
+    volume = wp.float64(1.0)
+    for k in range(3):
+        volume = volume * ((wp.float64(upper[k]) - wp.float64(lower[k])) / cell + wp.float64(1.0))
+    return volume
+
+
+@wp.func
+def is_wide(lower: wp.vec3, upper: wp.vec3, cell: wp.float64, limit: wp.float64) -> bool:
+    """Whether a box is wide: ``cell`` > 0 (a wide set is in use) and its cell volume exceeds ``limit``."""
+    if cell <= wp.float64(0.0):
+        return False
+    return box_cell_volume(lower, upper, cell) > limit
+
+
 @wp.kernel
 def _reset_counters(
     # out:
@@ -228,14 +262,17 @@ def _reduce_scene_chunks(
     chunk_upper: wp.array(dtype=wp.vec3),
     chunk_length_sum: wp.array(dtype=wp.float64),
     chunk_bad: wp.array(dtype=wp.int32),
+    chunk_extent: wp.array(dtype=wp.vec3),
 ):
-    """One thread per chunk of ``chunk_size`` faces."""
+    """One thread per chunk of ``chunk_size`` faces: its valid boxes' corners, axis-length sum and
+    largest extent per axis; its bad boxes."""
     c = wp.tid()
     begin = c * chunk_size
     end = wp.min(begin + chunk_size, face_lower.shape[0])
     lo = wp.vec3(wp.inf, wp.inf, wp.inf)
     hi = wp.vec3(-wp.inf, -wp.inf, -wp.inf)
     length_sum = wp.float64(0.0)
+    extent = wp.vec3(0.0)
     bad = int(0)
     for f in range(begin, end):
         a = face_lower[f]
@@ -246,11 +283,36 @@ def _reduce_scene_chunks(
         lo = wp.min(lo, a)
         hi = wp.max(hi, b)
         e = b - a
+        extent = wp.max(extent, e)
         length_sum += (wp.float64(e[0]) + wp.float64(e[1]) + wp.float64(e[2])) / wp.float64(3.0)
     chunk_lower[c] = lo
     chunk_upper[c] = hi
     chunk_length_sum[c] = length_sum
     chunk_bad[c] = bad
+    chunk_extent[c] = extent
+
+
+@wp.func
+def fold_chunks(
+    chunk_lower: wp.array(dtype=wp.vec3),
+    chunk_upper: wp.array(dtype=wp.vec3),
+    chunk_length_sum: wp.array(dtype=wp.float64),
+    chunk_count: int,
+    scene: wp.array(dtype=wp.float64),
+):
+    """scene[0:7] = the chunks' min corner, max corner and axis-length sum, folded in index order (the
+    result is deterministic)."""
+    lo = wp.vec3(wp.inf, wp.inf, wp.inf)
+    hi = wp.vec3(-wp.inf, -wp.inf, -wp.inf)
+    length_sum = wp.float64(0.0)
+    for c in range(chunk_count):
+        lo = wp.min(lo, chunk_lower[c])
+        hi = wp.max(hi, chunk_upper[c])
+        length_sum += chunk_length_sum[c]
+    for k in range(3):
+        scene[k] = wp.float64(lo[k])
+        scene[3 + k] = wp.float64(hi[k])
+    scene[6] = length_sum
 
 
 @wp.kernel
@@ -265,20 +327,11 @@ def _reduce_scene_total(
     scene: wp.array(dtype=wp.float64),
     info: wp.array(dtype=wp.int64),
 ):
-    """A single thread: folds the chunks in index order, so the result is deterministic."""
-    lo = wp.vec3(wp.inf, wp.inf, wp.inf)
-    hi = wp.vec3(-wp.inf, -wp.inf, -wp.inf)
-    length_sum = wp.float64(0.0)
+    """A single thread: the scene of every valid box (:func:`fold_chunks`) and the bad boxes."""
+    fold_chunks(chunk_lower, chunk_upper, chunk_length_sum, chunk_count, scene)
     bad = int(0)
     for c in range(chunk_count):
-        lo = wp.min(lo, chunk_lower[c])
-        hi = wp.max(hi, chunk_upper[c])
-        length_sum += chunk_length_sum[c]
         bad += chunk_bad[c]
-    for k in range(3):
-        scene[k] = wp.float64(lo[k])
-        scene[3 + k] = wp.float64(hi[k])
-    scene[6] = length_sum
     scene[7] = wp.float64(bad)
     info[_BAD_BOXES] = wp.int64(bad)
 
@@ -341,6 +394,20 @@ def _fit_estimate(cell_size: wp.float64, scene: wp.array(dtype=wp.float64), info
     return wp.float32(size)
 
 
+@wp.func
+def first_cell_size(scene: wp.array(dtype=wp.float64), face_count: int, cell_size_factor: wp.float64,
+                    fixed_cell_size: wp.float64) -> wp.float64:
+    """``fixed_cell_size`` when > 0, else the factor x the mean box axis length of the ``face_count``
+    faces in the scene's sum (the scene's largest extent, at least 1, when every box is a point)."""
+    cell = fixed_cell_size
+    if cell <= wp.float64(0.0):
+        cell = cell_size_factor * (scene[6] / wp.float64(face_count))
+        if not (cell > wp.float64(0.0)):
+            cell = wp.max(wp.max(scene[3] - scene[0], scene[4] - scene[1]), scene[5] - scene[2])
+            cell = wp.max(cell, wp.float64(1.0))
+    return cell
+
+
 @wp.kernel
 def _plan_grid(
     # in:
@@ -349,6 +416,7 @@ def _plan_grid(
     cell_size_factor: wp.float64,
     fixed_cell_size: wp.float64,
     half_distance: wp.float64,
+    wide_limit: wp.float64,
     # out:
     grid: wp.array(dtype=GridState),
     info: wp.array(dtype=wp.int64),
@@ -356,7 +424,8 @@ def _plan_grid(
 ):
     """A single thread: origin = the scene's min corner, the slab margin (from the scene box), the
     first cell size (``fixed_cell_size`` when > 0, else the factor x the mean box axis length; the
-    scene extent when every box is a point). Starts the grid loop unless a box or the order is bad."""
+    scene extent when every box is a point), all over the faces that are not wide (the wide cell
+    ``scene[8]`` when there are any). Starts the grid loop unless a box or the order is bad."""
     state = GridState()
     state.origin = wp.vec3(wp.float32(scene[0]), wp.float32(scene[1]), wp.float32(scene[2]))
     state.dims = wp.vec3i(0, 0, 0)
@@ -368,12 +437,12 @@ def _plan_grid(
         size = size + wp.max(wp.abs(lower), wp.abs(upper))
     state.margin = wp.float32(half_distance * (wp.float64(1.0) + _SLAB_PAD) + _SLAB_PAD * (size + half_distance))
     state.bound_pad = wp.float32(_BOUND_PAD * size)
-    cell = fixed_cell_size
-    if cell <= wp.float64(0.0):
-        cell = cell_size_factor * (scene[6] / wp.float64(face_count))
-        if not (cell > wp.float64(0.0)):
-            cell = wp.max(wp.max(scene[3] - scene[0], scene[4] - scene[1]), scene[5] - scene[2])
-            cell = wp.max(cell, wp.float64(1.0))
+    wide = int(info[_WIDE_FACES])
+    state.wide_cell = wp.float64(0.0)
+    if wide > 0:
+        state.wide_cell = scene[9]
+    state.wide_limit = wide_limit
+    cell = first_cell_size(scene, face_count - wide, cell_size_factor, fixed_cell_size)
     state.cell_size = float(1.0)
     flag = int(0)
     if info[_BAD_BOXES] == wp.int64(0) and info[_BAD_ORDER] == wp.int64(0):
@@ -398,7 +467,8 @@ def _count_face_cells(
     grid_max: wp.array(dtype=wp.int32),
 ):
     """One thread per face position k (face ``face_order[k]`` when ``ordered``, else face k): its cell
-    count goes to slot k; grid_max[3] counts node ids outside [0, node_limit) (when node_limit > 0)."""
+    count goes to slot k (0 for a wide face); grid_max[3] counts node ids outside [0, node_limit) (when
+    node_limit > 0)."""
     k = wp.tid()
     f = k
     if ordered != 0:
@@ -408,8 +478,13 @@ def _count_face_cells(
         if node < 0 or node >= node_limit:
             wp.atomic_add(grid_max, 3, 1)
     state = grid[0]
-    lo = cell_of_point(face_lower[f], state.origin, state.cell_size)
-    hi = cell_of_point(face_upper[f], state.origin, state.cell_size)
+    lower = face_lower[f]
+    upper = face_upper[f]
+    if is_wide(lower, upper, state.wide_cell, state.wide_limit):
+        face_cells[k] = wp.int64(0)  # not in the grid (the test of the wide faces pairs it)
+        return
+    lo = cell_of_point(lower, state.origin, state.cell_size)
+    hi = cell_of_point(upper, state.origin, state.cell_size)
     face_cells[k] = wp.int64(hi[0] - lo[0] + 1) * wp.int64(hi[1] - lo[1] + 1) * wp.int64(hi[2] - lo[2] + 1)
     wp.atomic_max(grid_max, 0, hi[0])
     wp.atomic_max(grid_max, 1, hi[1])
@@ -480,10 +555,11 @@ def _fill_entries(
     faces: wp.array(dtype=wp.int32),
 ):
     """One thread per face position k (as in ``_count_face_cells``): its entries at slot k of the exclusive
-    scan of cell counts (entries in face-position order); nothing when the entries do not fit."""
-    if info[_LIVE_ENTRIES] == wp.int64(0):
-        return
+    scan of cell counts (entries in face-position order); nothing when the entries do not fit or the
+    face is wide."""
     k = wp.tid()
+    if info[_LIVE_ENTRIES] == wp.int64(0) or face_cells[k] == wp.int64(0):
+        return  # the entries do not fit, or a wide face
     f = k
     if ordered != 0:
         f = face_order[k]
@@ -641,3 +717,4 @@ def _gather_summary(
         summary[_INFO_SIZE + k] = wp.float64(state.dims[k])
     summary[_INFO_SIZE + 3] = wp.float64(state.cell_size)
     summary[_INFO_SIZE + 4] = wp.float64(counts[0])
+    summary[_INFO_SIZE + 5] = state.wide_cell

@@ -17,8 +17,10 @@ run by one thread, found through *work rows* (a group against a run of later gro
 a token-position rule emits each overlapping face pair from exactly one cell. Calls with many BV
 tests per entry first compare 4-byte *cell codes* (each box end as a fifteenth of the cell, a lower end
 in an earlier cell as 0, packed so that one subtraction compares all six ends; the lower fields also
-decide the token rule) and load the boxes only where they overlap and the cell holds the token. See
-``docs/spatial-hash.md`` for the derivations.
+decide the token rule) and load the boxes only where they overlap and the cell holds the token. A face
+whose box is too large for the grid (a *wide* face: a ground quad, a flung vertex's swept box) is left
+out of it and of the cell size, and box-tested against every face instead
+(:mod:`pscc.collision._wide_face_kernels`). See ``docs/spatial-hash.md`` for the derivations.
 
 Device buffers of :class:`SpatialHash` (E = entries, G = groups, C = cells, R = work rows, P = pairs;
 every buffer has a fixed capacity, and kernels run at it and stop at the device counts):
@@ -26,7 +28,12 @@ every buffer has a fixed capacity, and kernels run at it and stop at the device 
 =========================  ====================  ===========================================================
 buffer                     shape, dtype          meaning
 =========================  ====================  ===========================================================
-scene                      (8,) float64          min corner, max corner, axis-length sum, bad boxes
+scene                      (11,) float64         min corner, max corner, axis-length sum of the faces in the
+                                                 grid; bad boxes; the wide-cell search (round's cell,
+                                                 accepted cell, ended)
+chunk_extent               (chunks,) vec3        largest box extent per axis of each scene chunk
+wide_faces                 (W,) int32            the call's wide faces, sorted (W = min(max_wide_faces,
+                                                 face_count / 8); docs/spatial-hash.md §6a)
 grid                       (1,) GridState        origin, cell size, dims and slab margin of this call
 loop_flag                  (1,) int32            condition of the grid loop (``wp.capture_while``)
 face_cells / face_end      (face_count,) int64   cells a face's box overlaps / inclusive scan (entry ends);
@@ -63,8 +70,9 @@ row_work / row_scan        (R,) int64            BV tests of row r = n_g x (b_en
 pairs / pair_keys          (2 P,) vec2i / int64  emitted face pairs (a < b) and their sort keys a m + b
                                                  (P slots and no keys when ``sort_pairs`` is off)
 counts                     (2,) int64            [pairs emitted (keeps counting past P), unused]
-info                       (19,) int64           device counters (``_spatial_hash_kernels.INFO_*``)
-summary                    (24,) float64         the counters, dims, cell size and pair count, read at once
+info                       (23,) int64           device counters (``_spatial_hash_kernels.INFO_*``)
+summary                    (29,) float64         the counters, dims, cell size, pair count and wide cell,
+                                                 read at once
 =========================  ====================  ===========================================================
 
 Two paths. :meth:`SpatialHash.find_pairs_device` reads nothing back, synchronizes nothing and allocates
@@ -91,6 +99,7 @@ import warp as wp
 from pscc._reductions import PrefixSum
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
+from pscc.collision import _wide_face_kernels as wide_kernels
 from pscc.collision import shared_vertex
 from pscc.collision.hash_arguments import check_face_array, diagonal_args, shared_args, slab_args
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
@@ -98,6 +107,7 @@ from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
     DEFAULT_CELL_SIZE_FACTOR,
     DEFAULT_MAX_MEAN_CELLS_PER_FACE,
+    DEFAULT_MAX_WIDE_FACES,
     DEFAULT_SLAB_EXACT_MIN_WORK,
     DEFAULT_SLAB_MIN_WORK,
     DEFAULT_TEST_THREADS,
@@ -111,6 +121,8 @@ from pscc.collision.spatial_hash_settings import (
     SLAB_PROBE_INTERVAL,
     SLAB_TEST_COST,
     TESTS_PER_LAUNCH,
+    WIDE_FACE_MIN_CELLS,
+    WIDE_FACE_SHARE,
     SpatialHashStats,
     check_positive,
 )
@@ -121,6 +133,7 @@ __all__ = [
     "CELL_CODE_MIN_TESTS",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_MAX_WIDE_FACES",
     "DEFAULT_SLAB_EXACT_MIN_WORK",
     "DEFAULT_SLAB_MIN_WORK",
     "DEFAULT_TEST_THREADS",
@@ -183,6 +196,12 @@ class SpatialHash:
             entry order) and loads the boxes only where the codes overlap; the pairs are the same
             either way (the codes never reject overlapping boxes). 0: always; 2^31: never. The
             choice is made on the device, so a recorded graph makes it anew on every replay.
+        max_wide_faces: most *wide* faces a call leaves out of the grid: faces whose box covers more
+            than max(64, face_count / 8) cells of the call's first cell size (a ground quad, a
+            collider's large triangle, a vertex flung far). Each is box-tested against every face
+            instead, and neither its cells nor its length reach the grid, so it does not coarsen the
+            cell size for everything else (:mod:`pscc.collision._wide_face_kernels`). A call that finds
+            more (or more than face_count / 8) inserts every face. 0: never. The pairs are the same.
 
     Raises:
         InputError: invalid arguments.
@@ -207,6 +226,7 @@ class SpatialHash:
         slab_min_work: int = DEFAULT_SLAB_MIN_WORK,
         slab_exact_min_work: int = DEFAULT_SLAB_EXACT_MIN_WORK,
         cell_code_min_tests: int = CELL_CODE_MIN_TESTS,
+        max_wide_faces: int = DEFAULT_MAX_WIDE_FACES,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
         self.group_slab_test = bool(group_slab_test)
@@ -244,6 +264,14 @@ class SpatialHash:
                              f"pass {CELL_CODE_MIN_TESTS} (the default), 0 to always use the codes or 2^31 to never")
         self.cell_code_min_tests = int(cell_code_min_tests)
         """BV tests per live entry from which a call compares cell codes first (:data:`CELL_CODE_MIN_TESTS`)."""
+        if (isinstance(max_wide_faces, bool) or not isinstance(max_wide_faces, int | np.integer)
+                or not 0 <= max_wide_faces <= MAX_ENTRIES):
+            raise InputError("argument", "max_wide_faces", f"{max_wide_faces!r} is not an integer >= 0",
+                             f"pass {DEFAULT_MAX_WIDE_FACES} (the default) or 0 to insert every face in the grid")
+        self.wide_capacity = min(int(max_wide_faces), int(face_count) // WIDE_FACE_SHARE)
+        """Most wide faces a call uses (0: none): ``max_wide_faces``, at most face_count / 8."""
+        self.wide_limit = float(max(WIDE_FACE_MIN_CELLS, face_count / WIDE_FACE_SHARE))
+        """Cells of the first cell size above which a face is wide."""
         self.face_count = int(face_count)
         self.cell_size_factor = check_positive(cell_size_factor, "cell_size_factor")
         self.max_mean_cells_per_face = check_positive(max_mean_cells_per_face, "max_mean_cells_per_face")
@@ -281,7 +309,9 @@ class SpatialHash:
         self.chunk_upper = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
         self.chunk_length_sum = wp.empty(self._chunk_count, dtype=wp.float64, device=dev)
         self.chunk_bad = wp.empty(self._chunk_count, dtype=wp.int32, device=dev)
-        self.scene = wp.zeros(8, dtype=wp.float64, device=dev)
+        self.chunk_extent = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
+        self.wide_faces = wp.zeros(max(1, self.wide_capacity), dtype=wp.int32, device=dev)
+        self.scene = wp.zeros(11, dtype=wp.float64, device=dev)
         self.grid = wp.zeros(1, dtype=kernels.GridState, device=dev)
         self.loop_flag = wp.zeros(1, dtype=wp.int32, device=dev)
         self.face_cells = wp.empty(max(1, m), dtype=wp.int64, device=dev)
@@ -432,7 +462,8 @@ class SpatialHash:
     def device_bytes(self) -> dict[str, int]:
         """Bytes held on the device, per buffer name."""
         # group_rank, cell_rank and group_start are views into the entry buffers' sort scratch.
-        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "scene", "grid", "loop_flag",
+        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "chunk_extent", "wide_faces",
+                 "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
                  "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "group_sphere",
@@ -620,6 +651,8 @@ class SpatialHash:
             self._insert_faces(face_lower, face_upper, node_id, node_bits, order, ordered, own_nodes or ordered)
             self._build_tables(face_lower, face_upper, node_bits, slab, int(ordered and not order_is_node_contiguous))
             self._test_pairs(face_lower, face_upper, diagonals, shared, node_bits)
+            if self.wide_capacity > 0:
+                self._test_wide_faces(face_lower, face_upper, node_id, diagonals, shared)
             if self.sort_pairs:
                 self._sort_pairs()
             if slab.enabled:
@@ -780,6 +813,10 @@ class SpatialHash:
             stats.slab_tests = int(info[kernels.INFO_SLAB_TESTS])
             stats.bv_tests = stats.face_tests + stats.slab_tests
             stats.same_node_tests = int(info[kernels.INFO_SAME_NODE])
+            stats.wide_faces = int(info[kernels.INFO_WIDE_FACES])
+            stats.wide_tests = int(info[kernels.INFO_WIDE_TESTS])
+            stats.wide_cell_size = float(summary[kernels.SUMMARY_WIDE_CELL])
+            stats.bv_tests += stats.wide_tests
             stats.triangle_pairs = int(info[kernels.SUMMARY_PAIRS])
             stats.coarsenings = int(info[kernels.INFO_COARSENINGS])
             stats.mean_cells_per_face = stats.entries / m
@@ -800,15 +837,17 @@ class SpatialHash:
 
     def _plan(self, face_lower: wp.array, face_upper: wp.array, face_order: wp.array | None,
               fixed_cell_size: float, half_distance: float) -> None:
-        """Scene bounds (a deterministic two-level reduction), the face order check, then the grid
-        plan: origin, slab margin, first cell size, and the grid loop's start flag."""
+        """Scene bounds (a deterministic two-level reduction), the face order check, the wide faces and
+        the scene without them, then the grid plan: origin, slab margin, first cell size, and the grid
+        loop's start flag."""
         dev = self.device
-        wp.launch(kernels._reduce_scene_chunks, dim=self._chunk_count,
+        chunks = self._chunk_count
+        wp.launch(kernels._reduce_scene_chunks, dim=chunks,
                   inputs=[face_lower, face_upper, self._chunk_size],
-                  outputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad], device=dev)
+                  outputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad,
+                           self.chunk_extent], device=dev)
         wp.launch(kernels._reduce_scene_total, dim=1,
-                  inputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad,
-                          self._chunk_count],
+                  inputs=[self.chunk_lower, self.chunk_upper, self.chunk_length_sum, self.chunk_bad, chunks],
                   outputs=[self.scene, self.info], device=dev)
         if face_order is not None:
             m = self.face_count
@@ -816,9 +855,34 @@ class SpatialHash:
             wp.launch(kernels._mark_face_order, dim=m, inputs=[face_order], outputs=[self.face_cells, self.info],
                       device=dev)
             wp.launch(kernels._check_marks, dim=m, inputs=[self.face_cells], outputs=[self.info], device=dev)
+        if self.wide_capacity > 0:
+            self._find_wide_faces(face_lower, face_upper, fixed_cell_size)
         wp.launch(kernels._plan_grid, dim=1,
-                  inputs=[self.scene, self.face_count, self.cell_size_factor, fixed_cell_size, half_distance],
+                  inputs=[self.scene, self.face_count, self.cell_size_factor, fixed_cell_size, half_distance,
+                          self.wide_limit],
                   outputs=[self.grid, self.info, self.loop_flag], device=dev)
+
+    def _find_wide_faces(self, face_lower: wp.array, face_upper: wp.array, fixed_cell_size: float) -> None:
+        """The wide faces (:mod:`pscc.collision._wide_face_kernels`): ``WIDE_ROUNDS`` rounds of the cell
+        search, each folding the scene without the faces wide at its cell, then the sorted list."""
+        dev = self.device
+        chunks = self._chunk_count
+        folded = [self.chunk_lower, self.chunk_upper, self.chunk_length_sum]
+        wp.launch(wide_kernels._plan_wide_faces, dim=1,
+                  inputs=[self.face_count, self.cell_size_factor, fixed_cell_size],
+                  outputs=[self.scene, self.info], device=dev)
+        for _ in range(wide_kernels.WIDE_ROUNDS):
+            wp.launch(wide_kernels._drop_wide_faces, dim=chunks,
+                      inputs=[face_lower, face_upper, self._chunk_size, self.scene, self.wide_limit, self.chunk_extent],
+                      outputs=[*folded, self.info], device=dev)
+            wp.launch(wide_kernels._accept_wide_faces, dim=1,
+                      inputs=[*folded, chunks, self.face_count, self.cell_size_factor, fixed_cell_size,
+                              self.wide_capacity],
+                      outputs=[self.scene, self.info], device=dev)
+        wp.launch(wide_kernels._list_wide_faces, dim=chunks,
+                  inputs=[face_lower, face_upper, self._chunk_size, self.scene, self.wide_limit, self.chunk_extent],
+                  outputs=[self.info, self.wide_faces], device=dev)
+        wp.launch(wide_kernels._sort_wide_faces, dim=1, inputs=[self.info], outputs=[self.wide_faces], device=dev)
 
     def _count_cells(self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array, node_limit: int,
                      order: wp.array, ordered: int) -> None:
@@ -907,6 +971,16 @@ class SpatialHash:
         wp.launch(row_kernels._test_bounding_volumes, dim=self.test_threads,
                   inputs=[face_lower, face_upper, diagonals, shared, self.grid, node_bits,
                           tables, self.info, self.pair_capacity],
+                  outputs=[self.counts, self.pairs], device=self.device)
+
+    def _test_wide_faces(self, face_lower: wp.array, face_upper: wp.array, node_id: wp.array,
+                         diagonals: kernels.DiagonalArgs, shared: shared_vertex.SharedVertexArgs) -> None:
+        """Every face against the wide faces of the call (nothing when there are none): one thread per
+        face on a GPU, per scene chunk on the CPU."""
+        per_thread = 1 if self.device.is_cuda else self._chunk_size
+        wp.launch(wide_kernels._test_wide_faces, dim=-(-self.face_count // per_thread),
+                  inputs=[face_lower, face_upper, node_id, self.grid, self.wide_faces, per_thread, diagonals, shared,
+                          self.info, self.pair_capacity],
                   outputs=[self.counts, self.pairs], device=self.device)
 
     def _sort_pairs(self) -> None:

@@ -15,6 +15,7 @@ __all__ = [
     "CELL_CODE_MIN_TESTS",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
+    "DEFAULT_MAX_WIDE_FACES",
     "DEFAULT_SLAB_EXACT_MIN_WORK",
     "SLAB_GROUP_COST",
     "SLAB_PROBE_INTERVAL",
@@ -28,6 +29,8 @@ __all__ = [
     "MIN_CELL_BITS",
     "SCENE_CHUNKS",
     "TESTS_PER_LAUNCH",
+    "WIDE_FACE_MIN_CELLS",
+    "WIDE_FACE_SHARE",
     "SpatialHashStats",
     "check_positive",
 ]
@@ -88,6 +91,18 @@ DEFAULT_MAX_MEAN_CELLS_PER_FACE: float = 64.0
 """Grid guard: when the entries exceed this many per face, the cell size is doubled and the
 faces are counted again (pairs are unchanged, only culling gets coarser)."""
 
+DEFAULT_MAX_WIDE_FACES: int = 64
+"""Most wide faces a call leaves out of the grid (each is box-tested against every face); a call that
+finds more inserts every face as usual. 0 turns wide faces off."""
+
+WIDE_FACE_MIN_CELLS: int = 64
+WIDE_FACE_SHARE: int = 8
+"""A face is wide when its box covers more than max(``WIDE_FACE_MIN_CELLS``, face_count /
+``WIDE_FACE_SHARE``) cells of the call's first cell size (from every face's box length): comparing it
+with every face then costs fewer box tests than its entries would cost (each entry costs a fill, a sort
+slot and the tests of its cell). Wide faces are used only when they are at most face_count /
+``WIDE_FACE_SHARE`` (and ``max_wide_faces``)."""
+
 SCENE_CHUNKS: int = 1024
 """Threads of the scene-bounds reduction (each folds a chunk of faces)."""
 
@@ -111,7 +126,7 @@ class SpatialHashStats:
         entries: face-cell insertions E.
         groups: distinct {cell, node} keys (triangleHashTable rows).
         cells: non-empty cells (workLoadHashTable rows).
-        bv_tests: bounding-volume tests run: ``face_tests + slab_tests``.
+        bv_tests: bounding-volume tests run: ``face_tests + slab_tests + wide_tests``.
         face_tests: face box tests run: sum over cells of sum_{i<j} n_i n_j over the group pairs
             that are not culled by a slab test (all of them when the slab test is off).
         slab_tests: group slab tests run (0 when the slab test is off).
@@ -123,6 +138,11 @@ class SpatialHashStats:
             buffers, which overflow before any pair is tested, are not counted).
         same_node_tests: face pairs of one node that met in a cell in two groups (never tested; 0
             unless a ``face_order`` splits a node; checked by the tests).
+        wide_faces: faces left out of the grid because their boxes were too large for it (each
+            box-tested against every other face instead).
+        wide_tests: face box tests against the wide faces (in ``bv_tests``, not in ``face_tests``).
+        wide_cell_size: the cell edge c0 of the wide test (0 when no face was wide): a face is wide
+            when prod_k (e_k / c0 + 1) > max(64, face_count / 8), e its box extent.
         device_bytes: bytes held on the device, per buffer.
     """
 
@@ -140,6 +160,9 @@ class SpatialHashStats:
     coarsenings: int = 0
     reruns: int = 0
     same_node_tests: int = 0
+    wide_faces: int = 0
+    wide_tests: int = 0
+    wide_cell_size: float = 0.0
     device_bytes: dict[str, int] = field(default_factory=dict)
 
 

@@ -449,3 +449,34 @@ def test_faces_and_rigid_objects_that_overflow_are_refused() -> None:
         CollisionDetector(faces)
     with pytest.raises(InputError, match=r"argument: rigid_objects: .*Fix: pass e\.g\."):
         CollisionDetector(faces[:1], rigid_objects=["glass"])
+
+
+@pytest.mark.parametrize("swept", [False, True])
+def test_ground_quad_far_larger_than_the_cloth(swept: bool) -> None:
+    """Two ground triangles 50 times the cloth's extent, crossing its layers (as frames exported from other
+    systems often hold): they stay out of the grid (wide faces) and every contact with them is found."""
+    mesh = folded_sheet(1500, layers=3, seed=5)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    centre, half = 0.5 * (lo + hi), 50.0 * float((hi - lo).max())
+    up = int(np.argmin(hi - lo))  # the ground lies across the layers, through the vertex nearest the centre
+    a, b = [k for k in range(3) if k != up]
+    height = mesh.vertices[np.argmin(np.linalg.norm(mesh.vertices - centre, axis=1)), up]
+    n = len(mesh.vertices)
+    ground = np.zeros((4, 3), dtype=np.float32)
+    ground[:, up] = height
+    ground[:, a] = centre[a] + np.float32([-half, half, half, -half])
+    ground[:, b] = centre[b] + np.float32([-half, -half, half, half])
+    faces = np.concatenate([mesh.faces, [[n, n + 1, n + 2], [n, n + 2, n + 3]]]).astype(np.int32)
+    rest = np.concatenate([mesh.rest, ground[:, [a, b]] if mesh.rest.shape[1] == 2 else ground])
+    object_ids = np.concatenate([np.zeros(len(mesh.faces)), [1, 1]]).astype(np.int32)
+    x0 = np.concatenate([mesh.vertices, ground])
+    x1 = np.concatenate([mesh.vertices_end, ground]) if swept else None
+    detectors = _detectors(faces, rest, object_ids)
+    thickness = 0.0 if swept else 0.01
+    reference = detectors["brute-force"].detect(x0, x1, thickness=thickness)
+    ground_rows = [r for r in reference.vertex_face if r[1] >= len(mesh.faces)]
+    assert ground_rows, "the ground meets the cloth"
+    for method in ("spatial-hash", "pscc"):
+        result = detectors[method].detect(x0, x1, thickness=thickness)
+        _assert_same_contacts(result, reference, faces, x0, x1, thickness, method)
+        assert detectors[method].spatial_hash.stats.wide_faces == 2, method

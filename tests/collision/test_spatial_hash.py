@@ -28,14 +28,30 @@ def _reference(lower: np.ndarray, upper: np.ndarray, node: np.ndarray, faces: np
     return np.argwhere(np.triu(overlap, 1)).astype(np.int32).reshape(-1, 2)
 
 
-def _reference_bv_tests(lower: np.ndarray, upper: np.ndarray, node: np.ndarray, cell_size: float) -> int:
-    """Sum over cells of sum_{i<j} n_i n_j, with the hash's float32 cell formula."""
-    origin = lower.min(axis=0)
+def _wide_mask(lower: np.ndarray, upper: np.ndarray, wide_cell: float) -> np.ndarray:
+    """The faces the hash leaves out of the grid: prod_k (e_k / c0 + 1) > max(64, m / 8) in float64."""
+    m = lower.shape[0]
+    if wide_cell <= 0.0:
+        return np.zeros(m, dtype=bool)
+    extent = upper.astype(np.float64) - lower.astype(np.float64)
+    volume = np.ones(m)
+    for k in range(3):
+        volume = volume * (extent[:, k] / wide_cell + 1.0)
+    return volume > max(64.0, m / 8)
+
+
+def _reference_bv_tests(lower: np.ndarray, upper: np.ndarray, node: np.ndarray, cell_size: float,
+                        wide_cell: float = 0.0) -> int:
+    """Sum over cells of sum_{i<j} n_i n_j over the faces in the grid, with the hash's float32 cell
+    formula, plus the tests of the wide faces (each against every other face once)."""
+    wide = _wide_mask(lower, upper, wide_cell)
+    w = int(wide.sum())
+    origin = lower[~wide].min(axis=0)
     cs = np.float32(cell_size)
     lo = np.floor((lower - origin) / cs).astype(np.int64)
     hi = np.floor((upper - origin) / cs).astype(np.int64)
     groups: dict[tuple[int, int, int], dict[int, int]] = {}
-    for f in range(lower.shape[0]):
+    for f in np.flatnonzero(~wide):
         for cell in itertools.product(*(range(lo[f, k], hi[f, k] + 1) for k in range(3))):
             per_node = groups.setdefault(cell, {})
             per_node[int(node[f])] = per_node.get(int(node[f]), 0) + 1
@@ -43,7 +59,7 @@ def _reference_bv_tests(lower: np.ndarray, upper: np.ndarray, node: np.ndarray, 
     for per_node in groups.values():
         n = np.array(list(per_node.values()), dtype=np.int64)
         total += int((n.sum() ** 2 - (n * n).sum()) // 2)
-    return total
+    return total + w * (lower.shape[0] - w) + w * (w - 1) // 2
 
 
 def _run(device: str, lower: np.ndarray, upper: np.ndarray, node: np.ndarray | None, cell_size: float | None = None,
@@ -67,7 +83,9 @@ def _check_exact(device: str, lower, upper, node, cell_size=None, **options) -> 
     np.testing.assert_array_equal(got, expected)  # sorted, so equality also rules out duplicates
     assert hash_.stats.same_node_tests == 0
     assert hash_.stats.triangle_pairs == expected.shape[0]
-    assert hash_.stats.bv_tests == _reference_bv_tests(lower, upper, node_ref, hash_.stats.cell_size)
+    assert hash_.stats.bv_tests == _reference_bv_tests(lower, upper, node_ref, hash_.stats.cell_size,
+                                                       hash_.stats.wide_cell_size)
+    assert hash_.stats.wide_faces == int(_wide_mask(lower, upper, hash_.stats.wide_cell_size).sum())
     return hash_
 
 
@@ -159,9 +177,70 @@ def test_huge_box_spanning_many_cells(device: str) -> None:
     lower = rng.uniform(0.0, 10.0, (400, 3)).astype(np.float32)
     upper = lower + 0.05
     lower[7], upper[7] = -1.0, 11.0
-    hash_ = _check_exact(device, lower, upper, None, cell_size=0.5)
-    assert hash_.stats.coarsenings == 0
+    hash_ = _check_exact(device, lower, upper, None, cell_size=0.5, max_wide_faces=0)
+    assert hash_.stats.coarsenings == 0 and hash_.stats.wide_faces == 0
     assert hash_.stats.entries > 24**3  # the huge box sits in every cell of the grid
+    # By default it is a wide face: out of the grid, tested against the 399 others.
+    hash_ = _check_exact(device, lower, upper, None, cell_size=0.5)
+    assert hash_.stats.wide_faces == 1 and hash_.stats.wide_tests == 399
+    assert hash_.stats.entries < 8 * 399
+
+
+@st.composite
+def _scenes_with_wide_faces(draw):
+    """Small boxes in the unit cube and 1 to 3 boxes far larger than the scene (flat ones like a ground
+    quad, or solid), some of them touching each other."""
+    m = draw(st.integers(64, 240))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    lower = rng.uniform(0.0, 1.0, (m, 3)).astype(np.float32)
+    upper = (lower + rng.exponential(0.03, (m, 3))).astype(np.float32)
+    wide = draw(st.integers(1, 3))
+    for i in rng.choice(m, wide, replace=False):
+        half = draw(st.sampled_from([20.0, 60.0, 300.0]))
+        height = np.float32(rng.uniform(0.0, 1.0))
+        flat = draw(st.booleans())
+        lower[i] = (0.5 - half, 0.5 - half, height if flat else 0.5 - half)
+        upper[i] = (0.5 + half, 0.5 + half, height if flat else 0.5 + half)
+    return lower, upper, wide
+
+
+@_SETTINGS
+@given(data=st.data(), scene=_scenes_with_wide_faces(), mode=st.sampled_from(["none", "distinct", "grouped"]),
+       cell_size=st.sampled_from([None, None, 0.05]))
+def test_wide_faces_match_reference(device: str, data, scene, mode: str, cell_size) -> None:
+    lower, upper, wide = scene
+    hash_ = _check_exact(device, lower, upper, _nodes(data.draw, lower.shape[0], mode), cell_size)
+    assert hash_.stats.wide_faces == wide
+    assert hash_.stats.entries <= 8 * lower.shape[0]  # the grid holds the small boxes only
+
+
+def test_wide_faces_leave_the_grid_as_it_was(device: str) -> None:
+    """Two ground quads around a cloth-like layer: the cell size and the entries of the others are
+    those without the ground, and every pair with the ground is found."""
+    lower, upper, _ = _cloth_boxes(1500, seed=7)
+    plain = _check_exact(device, lower, upper, None)
+    ground_lower = np.array([[-50.0, -50.0, 0.3], [-50.0, -50.0, 0.3]], dtype=np.float32)
+    ground_upper = np.array([[50.0, 50.0, 0.3], [50.0, 50.0, 0.3]], dtype=np.float32)
+    with_ground = _check_exact(device, np.concatenate([lower, ground_lower]), np.concatenate([upper, ground_upper]),
+                               None)
+    assert with_ground.stats.wide_faces == 2
+    assert with_ground.stats.cell_size == plain.stats.cell_size
+    assert with_ground.stats.entries == plain.stats.entries
+    assert with_ground.stats.triangle_pairs > plain.stats.triangle_pairs + 2  # the layer crosses the ground
+    inserted = _check_exact(device, np.concatenate([lower, ground_lower]), np.concatenate([upper, ground_upper]),
+                            None, max_wide_faces=0)
+    assert inserted.stats.wide_faces == 0 and inserted.stats.cell_size > 2 * plain.stats.cell_size
+
+
+def test_too_many_wide_faces_are_inserted(device: str) -> None:
+    """More wide faces than face_count / 8 (or than ``max_wide_faces``): every face goes in the grid."""
+    rng = np.random.default_rng(8)
+    lower = rng.uniform(0.0, 1.0, (64, 3)).astype(np.float32)
+    upper = lower + 0.02
+    lower[:9], upper[:9] = -20.0, 21.0  # 9 > 64 / 8
+    assert _check_exact(device, lower, upper, None).stats.wide_faces == 0
+    assert _check_exact(device, lower[5:], upper[5:], None).stats.wide_faces == 4
+    assert _check_exact(device, lower[5:], upper[5:], None, max_wide_faces=3).stats.wide_faces == 0
 
 
 def test_grid_guard_coarsens_without_losing_pairs(device: str) -> None:
@@ -169,7 +248,7 @@ def test_grid_guard_coarsens_without_losing_pairs(device: str) -> None:
     lower = rng.uniform(0.0, 10.0, (200, 3)).astype(np.float32)
     upper = lower + 0.05
     lower[0], upper[0] = -1.0, 11.0
-    hash_ = _check_exact(device, lower, upper, None, max_mean_cells_per_face=2.0)
+    hash_ = _check_exact(device, lower, upper, None, max_mean_cells_per_face=2.0, max_wide_faces=0)
     assert hash_.stats.coarsenings > 0
     assert hash_.stats.entries <= 2 * 200
     hash_ = _check_exact(device, lower, upper, None, cell_size=1e-6)  # grid cap
@@ -322,3 +401,21 @@ def test_device_bytes_counts_every_buffer_it_owns() -> None:
     counted = set(hash_.device_bytes)
     assert owned - counted == set()
     assert {"group_rank", "cell_rank", "group_start", "row_count", "row_end"}.isdisjoint(owned)
+
+
+def test_wide_face_sharing_a_vertex(device: str) -> None:
+    """A wide face that shares sheet vertices is dropped with ``skip_adjacent`` against exactly the faces it
+    shares one with, like a face in the grid."""
+    vertices, faces, _ = grid_sheet(8, 8)
+    far = vertices.max(axis=0) + 200.0
+    vertices = np.concatenate([vertices, [far, far + np.float32([0.0, 200.0, 0.0])]]).astype(np.float32)
+    n = len(vertices)
+    faces = np.concatenate([faces, [[0, n - 2, n - 1]]]).astype(np.int32)  # from sheet vertex 0 far away
+    tri = vertices[faces]
+    lower = (tri.min(axis=1) - 0.01).astype(np.float32)
+    upper = (tri.max(axis=1) + 0.01).astype(np.float32)
+    faces_wp = wp.array(faces, dtype=wp.vec3i, device=device)
+    skipped = _check_exact(device, lower, upper, None, faces=faces_wp, skip_adjacent=True, faces_np=faces)
+    kept = _check_exact(device, lower, upper, None)
+    assert skipped.stats.wide_faces == kept.stats.wide_faces == 1
+    assert skipped.stats.triangle_pairs < kept.stats.triangle_pairs
