@@ -52,6 +52,18 @@ def test_unknown_kind_and_skipped_examples_say_why(tmp_path: Path) -> None:
     assert any(s["spec"] == "newton style3d" and "network" in s["reason"] for s in skipped)
 
 
+def test_with_ground_adds_a_ground_piece_below_the_frame() -> None:
+    frame = _twisted_frame(500)
+    grounded = frame.with_ground()
+    assert grounded.face_count == frame.face_count + 2 and grounded.rest is None
+    assert grounded.name == "twisted + ground" and grounded.radius == frame.radius
+    assert list(grounded.object_ids[-2:]) == [1, 1] and not grounded.object_ids[:-2].any()
+    ground = grounded.positions[-4:]
+    assert np.all(ground[:, 1] == frame.positions[:, 1].min() - 2 * np.float32(frame.radius))
+    extent = float(np.ptp(frame.positions, axis=0).max())
+    assert np.ptp(ground[:, 0]) == pytest.approx(100 * extent)
+
+
 def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
     result = corpus_bench.bench_frame(_twisted_frame(2000), "cpu", repeats=1, with_newton=False, with_ipctk=False)
     methods = [r["method"] for r in result["rows"]]
@@ -109,6 +121,16 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     edge_edge = {tuple(sorted((tuple(sorted(edges[c.edge0_id])), tuple(sorted(edges[c.edge1_id])))))
                  for c in candidates.ee_candidates}
     assert {((int(a0), int(a1)), (int(b0), int(b1))) for a0, a1, b0, b1 in found.edge_edge} <= edge_edge
+    (grounded,) = results["grounded"]  # the shirt is one of GROUND_FRAMES
+    ground_rows = {r["method"]: r for r in grounded["rows"]}
+    assert grounded["frame"] == "unisex_shirt + ground" and grounded["faces"] == 12738
+    assert ground_rows["pscc-no-rest"]["wide_faces"] == ground_rows["spatial-hash"]["wide_faces"] == 2
+    assert ground_rows["pscc-no-rest"]["cell_size"] == pscc["cell_size"]  # the ground does not set the cell
+    assert ground_rows["pscc-no-rest"]["entries"] == pscc["entries"]
+    for key in ("vertex_face_pairs", "edge_edge_pairs"):  # two radii below the shirt: no contact added
+        assert ground_rows["spatial-hash"][key] == spatial[key]
+    assert grounded["ratios"]["pscc-no-rest"]["subset_of_spatial_hash"]
     text = "\n".join(corpus_bench.report(results))
     assert "| unisex_shirt | 12,736 | pscc (no rest) |" in text and "Targets met:" in text
+    assert "| unisex_shirt + ground | 2 |" in text
     assert "left out: newton style3d" in text

@@ -120,6 +120,26 @@ class CorpusFrame:
         """The same frame with no rest coordinates."""
         return CorpusFrame(self.name, self.source, self.positions, self.faces, None, self.object_ids, self.radius)
 
+    def with_ground(self, scale: float = 50.0) -> CorpusFrame:
+        """The frame without rest coordinates plus a ground quad (two triangles, a piece of its own)
+        ``scale`` times the frame's extent, two contact radii below its lowest point on the y axis (so it adds
+        no contact): how frames exported with a ground mesh look. Not an exported frame: a check of the grid
+        against very large faces."""
+        lower = self.positions.min(axis=0)
+        upper = self.positions.max(axis=0)
+        centre = 0.5 * (lower + upper)
+        half = scale * float((upper - lower).max())
+        below = float(lower[1]) - 2.0 * self.radius
+        corners = np.array([[centre[0] - half, below, centre[2] - half], [centre[0] + half, below, centre[2] - half],
+                            [centre[0] + half, below, centre[2] + half], [centre[0] - half, below, centre[2] + half]],
+                           dtype=np.float32)
+        n = self.positions.shape[0]
+        faces = np.concatenate([self.faces, np.array([[n, n + 1, n + 2], [n, n + 2, n + 3]], dtype=np.int32)])
+        ids = np.zeros(self.face_count, dtype=np.int32) if self.object_ids is None else self.object_ids
+        ids = np.concatenate([ids, np.full(2, int(ids.max()) + 1, dtype=np.int32)])
+        return CorpusFrame(f"{self.name} + ground", f"{self.source}; plus a ground quad {scale:g} times its extent",
+                           np.concatenate([self.positions, corners]), faces, None, ids, self.radius)
+
 
 @dataclass(frozen=True)
 class FrameSpec:

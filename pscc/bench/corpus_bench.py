@@ -43,7 +43,7 @@ from pscc.bench.broad_phase import NewtonDetection
 from pscc.bench.corpus import DEFAULT_CACHE_DIR, CorpusFrame, FrameSpec, load_corpus
 from pscc.collision.detector import CollisionDetector
 
-__all__ = ["CORPUS_REPEATS", "QUICK_REPEATS", "TARGETS", "IpctkLbvh", "bench_frame", "report", "run"]
+__all__ = ["CORPUS_REPEATS", "GROUND_FRAMES", "QUICK_REPEATS", "TARGETS", "IpctkLbvh", "bench_frame", "report", "run"]
 
 CORPUS_REPEATS: int = 15
 """Repeats of each method per frame with ``--corpus full`` (after one warm-up call each)."""
@@ -60,6 +60,10 @@ TARGETS: dict[str, float] = {
 }
 """Issue 14's targets: pscc triangle pairs over spatial-hash's with and without rest coordinates, and
 pscc's DCD time over Newton's detector, ipctk's one-thread LBVH and spatial-hash (at most these)."""
+
+GROUND_FRAMES: tuple[str, ...] = ("twisting", "unisex_shirt", "cloth_twist")
+"""Corpus frames benched again with a ground quad 50 times their extent (:meth:`CorpusFrame.with_ground`):
+the check that a few very large faces neither enter the grid nor set its cell size."""
 
 
 class _PsccRunner:
@@ -102,7 +106,10 @@ class _PsccRunner:
                 "triangle_pairs": stats["triangle_pairs"], "kept_triangle_pairs": stats.get("kept_triangle_pairs", 0),
                 "candidate_pairs": stats["candidate_pairs"], "vertex_face_pairs": stats["vertex_face_pairs"],
                 "edge_edge_pairs": stats["edge_edge_pairs"],
-                "bytes_per_triangle": stats["device_bytes"]["total"] / self.frame.face_count}
+                "bytes_per_triangle": stats["device_bytes"]["total"] / self.frame.face_count,
+                "cell_size": stats.get("grid", {}).get("cell_size", 0.0),
+                "entries": stats.get("grid", {}).get("entries", 0),
+                "wide_faces": stats.get("grid", {}).get("wide_faces", 0)}
 
 
 class _NewtonRunner:
@@ -311,8 +318,13 @@ def run(specs: tuple[FrameSpec, ...], device: str, repeats: int, with_newton: bo
     for frame in frames:
         out.append(bench_frame(frame, device, repeats, with_newton=with_newton))
         progress(f"benched {frame.name}")
-    return {"frames": out, "skipped": skipped, "repeats": repeats, "corpus_seconds": corpus_seconds,
-            "seconds": time.perf_counter() - started}
+    grounded = []
+    for frame in frames:
+        if frame.name.split()[0] in GROUND_FRAMES:
+            grounded.append(bench_frame(frame.with_ground(), device, repeats, with_newton=with_newton))
+            progress(f"benched {frame.name} + ground")
+    return {"frames": out, "grounded": grounded, "skipped": skipped, "repeats": repeats,
+            "corpus_seconds": corpus_seconds, "seconds": time.perf_counter() - started}
 
 
 def _verdict(value: float, target: float) -> str:
@@ -414,8 +426,37 @@ def report(results: dict[str, Any]) -> list[str]:
                      f"contact radius {entry['radius']:.4g}.")
     for skip in results["skipped"]:
         lines.append(f"- left out: {skip['spec']}: {skip['reason']}.")
+    lines += _ground_report(results)
     lines += ["", f"Section time: {results['seconds']:.0f} s, of which {results['corpus_seconds']:.0f} s loading "
               "or simulating the corpus (cached frames load in well under a second).", ""]
+    return lines
+
+
+def _ground_report(results: dict[str, Any]) -> list[str]:
+    """Lines of the ground-quad check: the same frames with two very large faces added."""
+    grounded = results.get("grounded", [])
+    if not grounded:
+        return []
+    plain = {entry["frame"]: entry for entry in results["frames"]}
+    lines = ["", "**A ground quad added.** The frames above, without rest coordinates, plus two ground triangles 50 "
+             "times the frame's extent just below it (`CorpusFrame.with_ground`; our check, not an exported frame: "
+             "exported scenes often carry such a ground or a collider's large triangles). The ground's faces are "
+             "*wide* (`docs/spatial-hash.md` section 6a): out of the grid and out of its cell size. Cell and entries "
+             "are pscc's, without and with the ground.", "",
+             "| frame | wide faces | cell | entries | time / spatial-hash | time / newton | time / ipctk 1 thread |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for entry in grounded:
+        base = plain.get(entry["frame"].removesuffix(" + ground"))
+        row = next(r for r in entry["rows"] if r["method"] == "pscc-no-rest")
+        before = next((r for r in base["rows"] if r["method"] == "pscc-no-rest"), None) if base else None
+        q = entry["ratios"]["pscc-no-rest"]
+        cell = f"{row['cell_size']:.4g}" if before is None else f"{before['cell_size']:.4g} / {row['cell_size']:.4g}"
+        entries = f"{row['entries']:,}" if before is None else f"{before['entries']:,} / {row['entries']:,}"
+        cells = [entry["frame"], str(row["wide_faces"]), cell, entries,
+                 _verdict(q["time_vs_spatial-hash"], TARGETS["time_vs_spatial_hash"])]
+        for key, target in (("newton", "time_vs_newton"), ("ipctk-lbvh-1", "time_vs_ipctk_1")):
+            cells.append(_verdict(q[f"time_vs_{key}"], TARGETS[target]) if f"time_vs_{key}" in q else "")
+        lines.append("| " + " | ".join(cells) + " |")
     return lines
 
 

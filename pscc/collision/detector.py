@@ -519,7 +519,8 @@ class CollisionDetector:
                          grid={"cell_size": float(hash_stats.cell_size), "cells": int(hash_stats.cells),
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
                                "face_tests": int(hash_stats.face_tests), "slab_tests": int(hash_stats.slab_tests),
-                               "mean_cells_per_face": float(hash_stats.mean_cells_per_face)})
+                               "mean_cells_per_face": float(hash_stats.mean_cells_per_face),
+                               "wide_faces": int(hash_stats.wide_faces), "wide_tests": int(hash_stats.wide_tests)})
         stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
         return stats
 
