@@ -48,6 +48,12 @@ groups past these are always tested face by face (conservative)."""
 
 MAX_GRID_CELLS: int = 2**31 - 1  # a CellId must fit in the high 31 bits of a non-negative int64 key
 
+LONG_FACE_RATIO: float = 3.0
+"""A grid face whose mean box axis length exceeds this many times the mean over the grid faces is *long*:
+left out of the mean that sets the cell size (still in the grid), so that a few colliders' long faces
+do not coarsen the cells of the cloth (:mod:`pscc.collision._wide_face_kernels`)."""
+_LONG_RATIO = wp.constant(wp.float64(LONG_FACE_RATIO))
+
 # Slots of the int64 ``info`` counters (device). "Live" counts are what the later stages use: the
 # count when its buffer holds it, else 0 (the stages after an overflow do nothing).
 INFO_ENTRIES: int = 0  # entries of the final grid (may exceed the entry capacity)
@@ -73,7 +79,8 @@ INFO_WIDE_FOUND: int = 19  # faces wide at the round's cell (:mod:`pscc.collisio
 INFO_WIDE_FACES: int = 20  # wide faces left out of the grid (0: none this call)
 INFO_WIDE_LISTED: int = 21  # wide faces listed (counter of ``_list_wide_faces``)
 INFO_WIDE_TESTS: int = 22  # face box tests against the wide faces
-INFO_SIZE: int = 23
+INFO_LONG_FACES: int = 23  # grid faces left out of the mean box length (:mod:`pscc.collision._wide_face_kernels`)
+INFO_SIZE: int = 24
 """Slots of ``info``; ``summary`` holds them, then N_x, N_y, N_z, the cell size, the pairs emitted and
 the wide cell."""
 SUMMARY_DIMS: int = INFO_SIZE
@@ -109,6 +116,7 @@ _SLAB_SAVED = wp.constant(INFO_SLAB_SAVED)
 _WIDE_FOUND = wp.constant(INFO_WIDE_FOUND)
 _WIDE_FACES = wp.constant(INFO_WIDE_FACES)
 _WIDE_LISTED = wp.constant(INFO_WIDE_LISTED)
+_LONG_FACES = wp.constant(INFO_LONG_FACES)
 _WIDE_TESTS = wp.constant(INFO_WIDE_TESTS)
 _INFO_SIZE = wp.constant(INFO_SIZE)
 
@@ -423,9 +431,10 @@ def _plan_grid(
     loop_flag: wp.array(dtype=wp.int32),
 ):
     """A single thread: origin = the scene's min corner, the slab margin (from the scene box), the
-    first cell size (``fixed_cell_size`` when > 0, else the factor x the mean box axis length; the
-    scene extent when every box is a point), all over the faces that are not wide (the wide cell
-    ``scene[8]`` when there are any). Starts the grid loop unless a box or the order is bad."""
+    first cell size (``fixed_cell_size`` when > 0, else the factor x the mean box axis length of the
+    grid faces that are not long; the scene extent when every box is a point), all over the faces that
+    are not wide (the wide cell ``scene[9]`` when there are any). Starts the grid loop unless a box or
+    the order is bad."""
     state = GridState()
     state.origin = wp.vec3(wp.float32(scene[0]), wp.float32(scene[1]), wp.float32(scene[2]))
     state.dims = wp.vec3i(0, 0, 0)
@@ -442,7 +451,7 @@ def _plan_grid(
     if wide > 0:
         state.wide_cell = scene[9]
     state.wide_limit = wide_limit
-    cell = first_cell_size(scene, face_count - wide, cell_size_factor, fixed_cell_size)
+    cell = first_cell_size(scene, face_count - wide - int(info[_LONG_FACES]), cell_size_factor, fixed_cell_size)
     state.cell_size = float(1.0)
     flag = int(0)
     if info[_BAD_BOXES] == wp.int64(0) and info[_BAD_ORDER] == wp.int64(0):

@@ -1,4 +1,4 @@
-"""Kernels of the *wide faces* of :class:`pscc.collision.spatial_hash.SpatialHash` (private: only that host
+"""Kernels of the *wide* and *long* faces of :class:`pscc.collision.spatial_hash.SpatialHash` (private: only that host
 imports them).
 
 A face whose box covers more than ``wide_limit`` cells of a *wide cell* is *wide*: a ground quad, a
@@ -28,8 +28,16 @@ kernel                                   one thread per
                                          next round's cell
 ``_list_wide_faces``                     chunk of faces: lists the wide faces of the accepted cell
 ``_sort_wide_faces``                     (single thread) sorts that list (face order on every device)
+``_find_long_faces``                     chunk of faces (no explicit cell size): its long faces' length
+                                         sum and count
+``_drop_long_faces``                     (single thread) takes them out of the scene's length sum
 ``_test_wide_faces``                     run of ``faces_per_thread`` faces: each against every wide face
 =======================================  =============================================================
+
+*Long* faces are the milder case: grid faces whose mean box axis length exceeds ``LONG_FACE_RATIO`` (3)
+times the mean of the grid faces (``cloth_rollers``' 120 cm roller walls beside 3 x 7 cm cloth cells). They
+stay in the grid but leave the mean that sets the cell size (``_find_long_faces``, ``_drop_long_faces``),
+so the cell suits the faces that make up the dense regions. At most a third of the faces can be long.
 
 ``scene[8]`` holds the cell of the current round, ``scene[9]`` the accepted cell (0: no wide faces),
 ``scene[10]`` 1 once the search has ended. The classification, prod_k (e_k / c + 1) > ``wide_limit`` in
@@ -45,6 +53,8 @@ from pscc.collision._hash_row_kernels import face_pair_kept
 from pscc.collision._spatial_hash_kernels import (
     _BAD_BOXES,
     _BAD_ORDER,
+    _LONG_FACES,
+    _LONG_RATIO,
     _WIDE_FACES,
     _WIDE_FOUND,
     _WIDE_LISTED,
@@ -213,6 +223,77 @@ def _sort_wide_faces(
             wide_faces[j] = wide_faces[j - 1]
             j -= 1
         wide_faces[j] = f
+
+
+@wp.func
+def _grid_faces(face_count: int, info: wp.array(dtype=wp.int64)) -> int:
+    """The faces in the grid: every face but the wide ones."""
+    return face_count - int(info[_WIDE_FACES])
+
+
+@wp.kernel
+def _find_long_faces(
+    # in:
+    face_lower: wp.array(dtype=wp.vec3),
+    face_upper: wp.array(dtype=wp.vec3),
+    chunk_size: int,
+    scene: wp.array(dtype=wp.float64),
+    info: wp.array(dtype=wp.int64),
+    wide_limit: wp.float64,
+    chunk_extent: wp.array(dtype=wp.vec3),
+    # out:
+    chunk_long_sum: wp.array(dtype=wp.float64),
+    chunk_long_count: wp.array(dtype=wp.int32),
+):
+    """One thread per chunk of faces, after the wide faces: the axis-length sum and the count of the
+    chunk's *long* faces, grid faces whose mean box axis length exceeds ``LONG_FACE_RATIO`` times the mean
+    of all grid faces (0 for a chunk whose largest extents cannot make one)."""
+    c = wp.tid()
+    limit = _LONG_RATIO * scene[6] / wp.float64(_grid_faces(face_lower.shape[0], info))
+    bound = chunk_extent[c]
+    long_sum = wp.float64(0.0)
+    count = int(0)
+    if (wp.float64(bound[0]) + wp.float64(bound[1]) + wp.float64(bound[2])) / wp.float64(3.0) > limit:
+        wide_cell = wp.float64(0.0)
+        if info[_WIDE_FACES] > wp.int64(0):
+            wide_cell = scene[9]
+        begin = c * chunk_size
+        end = wp.min(begin + chunk_size, face_lower.shape[0])
+        for f in range(begin, end):
+            a = face_lower[f]
+            b = face_upper[f]
+            if not (wp.isfinite(a) and wp.isfinite(b)) or is_wide(a, b, wide_cell, wide_limit):
+                continue
+            e = b - a
+            length = (wp.float64(e[0]) + wp.float64(e[1]) + wp.float64(e[2])) / wp.float64(3.0)
+            if length > limit:
+                long_sum += length
+                count += 1
+    chunk_long_sum[c] = long_sum
+    chunk_long_count[c] = count
+
+
+@wp.kernel
+def _drop_long_faces(
+    # in:
+    chunk_long_sum: wp.array(dtype=wp.float64),
+    chunk_long_count: wp.array(dtype=wp.int32),
+    chunk_count: int,
+    # in / out:
+    scene: wp.array(dtype=wp.float64),
+    info: wp.array(dtype=wp.int64),
+):
+    """A single thread: the long faces' lengths leave the scene's length sum (``scene[6]``), folded in
+    chunk order, and their count goes to ``info[INFO_LONG_FACES]``, so that the cell size is the factor
+    times the mean of the other grid faces. They stay in the scene box and in the grid."""
+    long_sum = wp.float64(0.0)
+    count = wp.int64(0)
+    for c in range(chunk_count):
+        long_sum += chunk_long_sum[c]
+        count += wp.int64(chunk_long_count[c])
+    if count > wp.int64(0):
+        scene[6] = scene[6] - long_sum
+        info[_LONG_FACES] = count
 
 
 @wp.kernel

@@ -520,7 +520,8 @@ class CollisionDetector:
                                "groups": int(hash_stats.groups), "entries": int(hash_stats.entries),
                                "face_tests": int(hash_stats.face_tests), "slab_tests": int(hash_stats.slab_tests),
                                "mean_cells_per_face": float(hash_stats.mean_cells_per_face),
-                               "wide_faces": int(hash_stats.wide_faces), "wide_tests": int(hash_stats.wide_tests)})
+                               "wide_faces": int(hash_stats.wide_faces), "wide_tests": int(hash_stats.wide_tests),
+                               "long_faces": int(hash_stats.long_faces)})
         stats["candidate_pairs"] = self.candidates.vertex_face_count + self.candidates.edge_edge_count
         return stats
 

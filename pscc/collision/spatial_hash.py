@@ -310,6 +310,8 @@ class SpatialHash:
         self.chunk_length_sum = wp.empty(self._chunk_count, dtype=wp.float64, device=dev)
         self.chunk_bad = wp.empty(self._chunk_count, dtype=wp.int32, device=dev)
         self.chunk_extent = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
+        self.chunk_long_sum = wp.empty(self._chunk_count, dtype=wp.float64, device=dev)
+        self.chunk_long_count = wp.empty(self._chunk_count, dtype=wp.int32, device=dev)
         self.wide_faces = wp.zeros(max(1, self.wide_capacity), dtype=wp.int32, device=dev)
         self.scene = wp.zeros(11, dtype=wp.float64, device=dev)
         self.grid = wp.zeros(1, dtype=kernels.GridState, device=dev)
@@ -462,7 +464,8 @@ class SpatialHash:
     def device_bytes(self) -> dict[str, int]:
         """Bytes held on the device, per buffer name."""
         # group_rank, cell_rank and group_start are views into the entry buffers' sort scratch.
-        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "chunk_extent", "wide_faces",
+        names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "chunk_extent", "chunk_long_sum",
+                 "chunk_long_count", "wide_faces",
                  "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
                  "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "cell_end",
@@ -816,6 +819,7 @@ class SpatialHash:
             stats.wide_faces = int(info[kernels.INFO_WIDE_FACES])
             stats.wide_tests = int(info[kernels.INFO_WIDE_TESTS])
             stats.wide_cell_size = float(summary[kernels.SUMMARY_WIDE_CELL])
+            stats.long_faces = int(info[kernels.INFO_LONG_FACES])
             stats.bv_tests += stats.wide_tests
             stats.triangle_pairs = int(info[kernels.SUMMARY_PAIRS])
             stats.coarsenings = int(info[kernels.INFO_COARSENINGS])
@@ -857,6 +861,14 @@ class SpatialHash:
             wp.launch(kernels._check_marks, dim=m, inputs=[self.face_cells], outputs=[self.info], device=dev)
         if self.wide_capacity > 0:
             self._find_wide_faces(face_lower, face_upper, fixed_cell_size)
+        if fixed_cell_size == 0.0:
+            wp.launch(wide_kernels._find_long_faces, dim=chunks,
+                      inputs=[face_lower, face_upper, self._chunk_size, self.scene, self.info, self.wide_limit,
+                              self.chunk_extent],
+                      outputs=[self.chunk_long_sum, self.chunk_long_count], device=dev)
+            wp.launch(wide_kernels._drop_long_faces, dim=1,
+                      inputs=[self.chunk_long_sum, self.chunk_long_count, chunks],
+                      outputs=[self.scene, self.info], device=dev)
         wp.launch(kernels._plan_grid, dim=1,
                   inputs=[self.scene, self.face_count, self.cell_size_factor, fixed_cell_size, half_distance,
                           self.wide_limit],

@@ -143,6 +143,8 @@ class SpatialHashStats:
         wide_tests: face box tests against the wide faces (in ``bv_tests``, not in ``face_tests``).
         wide_cell_size: the cell edge c0 of the wide test (0 when no face was wide): a face is wide
             when prod_k (e_k / c0 + 1) > max(64, face_count / 8), e its box extent.
+        long_faces: grid faces whose mean box axis length exceeds 3 times the grid faces' mean, left out
+            of the mean that sets the cell size (0 with an explicit ``cell_size``).
         device_bytes: bytes held on the device, per buffer.
     """
 
@@ -163,6 +165,7 @@ class SpatialHashStats:
     wide_faces: int = 0
     wide_tests: int = 0
     wide_cell_size: float = 0.0
+    long_faces: int = 0
     device_bytes: dict[str, int] = field(default_factory=dict)
 
 

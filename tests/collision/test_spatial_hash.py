@@ -419,3 +419,18 @@ def test_wide_face_sharing_a_vertex(device: str) -> None:
     kept = _check_exact(device, lower, upper, None)
     assert skipped.stats.wide_faces == kept.stats.wide_faces == 1
     assert skipped.stats.triangle_pairs < kept.stats.triangle_pairs
+
+
+def test_long_faces_leave_the_mean_but_not_the_grid(device: str) -> None:
+    """A few faces far longer than the rest (a collider's walls beside the cloth) do not set the cell size:
+    it is the factor times the mean box axis length of the other faces; the pairs are exact."""
+    rng = np.random.default_rng(9)
+    lower = rng.uniform(0.0, 4.0, (400, 3)).astype(np.float32)
+    upper = (lower + rng.uniform(0.05, 0.15, (400, 3))).astype(np.float32)
+    upper[:20, 0] = lower[:20, 0] + 3.0  # 20 slivers 30 times as long on x
+    hash_ = _check_exact(device, lower, upper, None)
+    assert hash_.stats.long_faces == 20 and hash_.stats.wide_faces == 0
+    mean_length = ((upper[20:].astype(np.float64) - lower[20:]).mean(axis=1)).mean()
+    assert hash_.stats.cell_size == pytest.approx(2.5 * mean_length, rel=1e-6)
+    fixed = _check_exact(device, lower, upper, None, cell_size=0.5)
+    assert fixed.stats.long_faces == 0 and fixed.stats.cell_size == 0.5
