@@ -13,6 +13,7 @@ kernel                                   one thread per
                                          whether the test pass reads cell codes
 ``_write_rows``                          group slot: its rows and the BV tests of each
 ``_write_entry_codes``                   entry slot: its cell code (when the test pass reads them)
+``_write_code_masks``                    block of 64 entry slots: its code masks (`_code_mask_kernels`)
 ``_test_bounding_volumes``               test thread: a contiguous chunk of the BV tests
 =======================================  =============================================================
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from pscc.collision._code_mask_kernels import code_mask_query, lowest_bit
 from pscc.collision._spatial_hash_kernels import (
     _CELL_CODES,
     _FACE_TESTS,
@@ -551,6 +553,8 @@ def entry_cell_code(
     return code | (lower_end_code(first[2], lo[2], cz) << wp.uint32(25))
 
 
+_ALL_BITS = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
+
 CODE_UPPER_BITS = wp.constant(wp.uint32(0x7FFF))
 CODE_LOWER_BITS = wp.constant(wp.uint32(0x3FFF8000))
 CODE_GUARDS = wp.constant(wp.uint32(0x21084210))  # bit 4 of each of the six 5-bit fields
@@ -677,7 +681,9 @@ def _test_bounding_volumes(
     in the token cell) the ten diagonal slabs. When ``_gather_row_info`` chose cell codes for the call,
     the boxes are loaded only for entries whose codes overlap (``cell_codes_overlap``, read in entry
     order, in a tight scan) and hold the token (``codes_hold_token``, which then replaces the token test
-    on the boxes); the codes never reject a pair whose boxes overlap and whose cell emits it. A pair of
+    on the boxes); the codes never reject a pair whose boxes overlap and whose cell emits it. On a run of at
+least ``tables.mask_min_run`` entries of a row, the entries whose codes pass are found through the code
+masks, 64 at a time (:mod:`pscc.collision._code_mask_kernels`; the same entries in the same order). A pair of
     faces that share a vertex is dropped with ``shared.mode`` skip (before the diagonals), or with
     certify, after every other test, when its two faces are certified
     (:func:`~pscc.collision.shared_vertex.shared_pair_certified`)."""
@@ -697,6 +703,8 @@ def _test_bounding_volumes(
     row_work = tables.row_work
     row_scan = tables.row_scan
     entry_code = tables.entry_code
+    code_masks = tables.code_masks
+    mask_min_run = tables.mask_min_run
     use_codes = info[_CELL_CODES] != wp.int64(0)
     r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
     q = k - (row_scan[r] - row_work[r])
@@ -717,6 +725,9 @@ def _test_bounding_volumes(
         code_a = entry_code[entry_a]
     minuend_a = code_minuend(code_a)
     subtrahend_a = code_subtrahend(code_a)
+    # Entry a's code test against one 64-entry block of the code masks, kept while a stays the same.
+    block = int(-1)
+    block_bits = wp.uint64(0)
     while k < end_test:
         # The tests of entry a against entries [entry_b, segment_end) of its row (the chunk may end first).
         segment_end = b_end
@@ -726,13 +737,26 @@ def _test_bounding_volumes(
         while entry_b < segment_end:
             # Rows never pair two groups of one node (``_plan_rows`` leaves such groups out).
             if use_codes:
-                # The codes decide the token rule exactly and reject most pairs: skip those in a tight scan.
-                while entry_b < segment_end:
-                    code_b = entry_code[entry_b]
-                    if cell_codes_overlap(minuend_a, subtrahend_a, code_b):
-                        if codes_hold_token(code_a, code_b):
+                # The codes decide the token rule exactly and reject most pairs: skip those, 64 entries a
+                # word through the code masks on long runs, else in a tight scan.
+                if segment_end - entry_b >= mask_min_run:
+                    while entry_b < segment_end:
+                        word = entry_b >> 6
+                        if word != block:
+                            block = word
+                            block_bits = code_mask_query(code_masks, word, code_a)
+                        bits = block_bits & (_ALL_BITS << wp.uint64(entry_b & 63))
+                        if bits != wp.uint64(0):
+                            entry_b = wp.min(word * 64 + lowest_bit(bits), segment_end)
                             break
-                    entry_b += 1
+                        entry_b = wp.min((word + 1) * 64, segment_end)
+                else:
+                    while entry_b < segment_end:
+                        code_b = entry_code[entry_b]
+                        if cell_codes_overlap(minuend_a, subtrahend_a, code_b):
+                            if codes_hold_token(code_a, code_b):
+                                break
+                        entry_b += 1
                 if entry_b == segment_end:
                     break
             fa = entry_face[entry_a]
@@ -769,3 +793,4 @@ def _test_bounding_volumes(
             code_a = entry_code[entry_a]
             minuend_a = code_minuend(code_a)
             subtrahend_a = code_subtrahend(code_a)
+            block = -1

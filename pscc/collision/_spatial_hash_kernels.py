@@ -160,6 +160,8 @@ class TableArgs:
     row_work: wp.array(dtype=wp.int64)
     row_scan: wp.array(dtype=wp.int64)
     entry_code: wp.array(dtype=wp.uint32)
+    code_masks: wp.array(dtype=wp.uint64)
+    mask_min_run: int
 
 
 @wp.struct

@@ -17,7 +17,8 @@ run by one thread, found through *work rows* (a group against a run of later gro
 a token-position rule emits each overlapping face pair from exactly one cell. Calls with many BV
 tests per entry first compare 4-byte *cell codes* (each box end as a fifteenth of the cell, a lower end
 in an earlier cell as 0, packed so that one subtraction compares all six ends; the lower fields also
-decide the token rule) and load the boxes only where they overlap and the cell holds the token. A face
+decide the token rule) and load the boxes only where they overlap and the cell holds the token; on runs
+of consecutive entries the *code masks* (bit masks of the codes per 64 entries) find those 64 at a time. A face
 whose box is too large for the grid (a *wide* face: a ground quad, a flung vertex's swept box) is left
 out of it and of the cell size, and box-tested against every face instead
 (:mod:`pscc.collision._wide_face_kernels`). See ``docs/spatial-hash.md`` for the derivations.
@@ -48,6 +49,9 @@ group_cell                 (G,) int32            cell rank of group g (workLoadH
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
 entry_code                 (E,) uint32           cell code of each sorted entry: its box ends as fifteenths
                                                  of its cell (written only when the call uses the codes)
+code_masks                 (96 ceil(E / 64),)    per block of 64 sorted entries, per axis and quantised end,
+                           uint64                the entries whose lower end is at most / upper end at least
+                                                 it (:mod:`pscc.collision._code_mask_kernels`; with the codes)
 group_axis / group_slab    (S,) vec3 / vec2      slab test only: axis of group g / (min, max) of its
                                                  faces' vertices on the axis (1 slot when off); S, the
                                                  slab capacity, grows with the groups of slab-testing
@@ -97,6 +101,7 @@ import numpy as np
 import warp as wp
 
 from pscc._reductions import PrefixSum
+from pscc.collision import _code_mask_kernels as mask_kernels
 from pscc.collision import _hash_row_kernels as row_kernels
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision import _wide_face_kernels as wide_kernels
@@ -105,6 +110,7 @@ from pscc.collision.hash_arguments import check_face_array, diagonal_args, share
 from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
 from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
+    CODE_MASK_MIN_RUN,
     DEFAULT_CELL_SIZE_FACTOR,
     DEFAULT_MAX_MEAN_CELLS_PER_FACE,
     DEFAULT_MAX_WIDE_FACES,
@@ -131,6 +137,7 @@ from pscc.geometry.dop import vec10
 
 __all__ = [
     "CELL_CODE_MIN_TESTS",
+    "CODE_MASK_MIN_RUN",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
     "DEFAULT_MAX_WIDE_FACES",
@@ -196,6 +203,12 @@ class SpatialHash:
             entry order) and loads the boxes only where the codes overlap; the pairs are the same
             either way (the codes never reject overlapping boxes). 0: always; 2^31: never. The
             choice is made on the device, so a recorded graph makes it anew on every replay.
+        code_mask_min_run: with the codes, entry a's tests against a run of at least this many
+            consecutive entries of its row read the *code masks* instead of one code per entry: per
+            block of 64 sorted entries, one word per axis and quantised end holds the entries whose
+            lower end is at most / upper end at least that value, so nine words give the entries of
+            the block that pass a's code test (:mod:`pscc.collision._code_mask_kernels`). The pairs are
+            the same. 1: always; 2^31 - 1: never.
         max_wide_faces: most *wide* faces a call leaves out of the grid: faces whose box covers more
             than max(64, face_count / 8) cells of the call's first cell size (a ground quad, a
             collider's large triangle, a vertex flung far). Each is box-tested against every face
@@ -226,6 +239,7 @@ class SpatialHash:
         slab_min_work: int = DEFAULT_SLAB_MIN_WORK,
         slab_exact_min_work: int = DEFAULT_SLAB_EXACT_MIN_WORK,
         cell_code_min_tests: int = CELL_CODE_MIN_TESTS,
+        code_mask_min_run: int = CODE_MASK_MIN_RUN,
         max_wide_faces: int = DEFAULT_MAX_WIDE_FACES,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
@@ -264,6 +278,15 @@ class SpatialHash:
                              f"pass {CELL_CODE_MIN_TESTS} (the default), 0 to always use the codes or 2^31 to never")
         self.cell_code_min_tests = int(cell_code_min_tests)
         """BV tests per live entry from which a call compares cell codes first (:data:`CELL_CODE_MIN_TESTS`)."""
+        if (isinstance(code_mask_min_run, bool) or not isinstance(code_mask_min_run, int | np.integer)
+                or not 1 <= code_mask_min_run <= 2**31 - 1):
+            raise InputError("argument", "code_mask_min_run",
+                             f"{code_mask_min_run!r} is not an integer in [1, 2^31 - 1]",
+                             f"pass {CODE_MASK_MIN_RUN} (the default), 1 to always use the code masks or 2^31 - 1 "
+                             "to never")
+        self.code_mask_min_run = int(code_mask_min_run)
+        """Row segments of at least this many entries find code-test passes through the code masks
+        (:data:`CODE_MASK_MIN_RUN`)."""
         if (isinstance(max_wide_faces, bool) or not isinstance(max_wide_faces, int | np.integer)
                 or not 0 <= max_wide_faces <= MAX_ENTRIES):
             raise InputError("argument", "max_wide_faces", f"{max_wide_faces!r} is not an integer >= 0",
@@ -430,6 +453,7 @@ class SpatialHash:
         pair_slots = 2 * getattr(self, "pair_capacity", 1) if self.sort_pairs else getattr(self, "pair_capacity", 1)
         tables = [TableSpec("entry_key", 2 * n, wp.int64), TableSpec("entry_face", 2 * n, wp.int32),
                   TableSpec("entry_code", n, wp.uint32),
+                  TableSpec("code_masks", mask_kernels.block_count(n) * mask_kernels.WORDS_PER_BLOCK, wp.uint64),
                   TableSpec("cell_end", n, wp.int32), TableSpec("group_end", g, wp.int32),
                   TableSpec("group_cell", g, wp.int32), TableSpec("row_span", rows, wp.vec3i),
                   TableSpec("row_work", rows, wp.int64), TableSpec("row_scan", rows, wp.int64),
@@ -468,7 +492,7 @@ class SpatialHash:
                  "chunk_long_count", "wide_faces",
                  "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
-                 "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "cell_end",
+                 "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "code_masks", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "group_sphere",
                  "row_span",
                  "row_work",
@@ -967,6 +991,8 @@ class SpatialHash:
         wp.launch(row_kernels._write_entry_codes, dim=n,
                   inputs=[self.entry_key, self.entry_face, face_lower, face_upper, self.grid, node_bits, self.info],
                   outputs=[self.entry_code], device=dev)
+        wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
+                  outputs=[self.code_masks], device=dev)
 
     def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, diagonals: kernels.DiagonalArgs,
                     shared: shared_vertex.SharedVertexArgs, node_bits: int) -> None:
@@ -980,6 +1006,8 @@ class SpatialHash:
         tables.row_work = self.row_work
         tables.row_scan = self.row_scan
         tables.entry_code = self.entry_code
+        tables.code_masks = self.code_masks
+        tables.mask_min_run = self.code_mask_min_run
         wp.launch(row_kernels._test_bounding_volumes, dim=self.test_threads,
                   inputs=[face_lower, face_upper, diagonals, shared, self.grid, node_bits,
                           tables, self.info, self.pair_capacity],

@@ -13,6 +13,7 @@ from pscc.errors import InputError
 
 __all__ = [
     "CELL_CODE_MIN_TESTS",
+    "CODE_MASK_MIN_RUN",
     "DEFAULT_CELL_SIZE_FACTOR",
     "DEFAULT_MAX_MEAN_CELLS_PER_FACE",
     "DEFAULT_MAX_WIDE_FACES",
@@ -105,6 +106,11 @@ slot and the tests of its cell). Wide faces are used only when they are at most 
 
 SCENE_CHUNKS: int = 1024
 """Threads of the scene-bounds reduction (each folds a chunk of faces)."""
+
+CODE_MASK_MIN_RUN: int = 4
+"""Entries of a row segment (entry a against consecutive entries of later groups of its cell) from which
+the test pass finds the entries that pass a's code test through the code masks (nine words per 64
+entries, :mod:`pscc.collision._code_mask_kernels`) rather than code by code. The pairs are the same."""
 
 CELL_CODE_MIN_TESTS: int = 4
 """BV tests per entry from which a call's test pass first compares the entries' cell codes (4 bytes,
