@@ -36,9 +36,9 @@ __all__ = [
     "check_positive",
 ]
 
-DEFAULT_CELL_SIZE_FACTOR: float = 2.5
+DEFAULT_CELL_SIZE_FACTOR: float = 3.0
 """k in Size_cell = k x BoxAxisLen_aver (the paper does not give its value; ``docs/spatial-hash.md``
-section 6 has the measurements behind 2.5)."""
+section 6 has the measurements behind 3)."""
 
 TESTS_PER_LAUNCH: int = 2**24
 """Default bound on the BV tests of one test launch: the launch has at most

@@ -133,7 +133,7 @@ def test_twisted_layers_discrete(turns: float) -> None:
 
 def test_slab_test_cuts_face_tests_between_twisted_layers() -> None:
     # At this resolution and k = 1.5 a cell holds a nearly flat piece of each layer, two edges from the
-    # next (the default k = 2.5 gives larger cells, in which the layers bend more: 0.66 of the tests).
+    # next (the default k = 3 gives larger cells, in which the layers bend more: 0.66 of the tests).
     mesh, x, half, detector = _twisted_front(12000, 0, 0.5)
     node = detector.front.node_id.numpy()
     slab_pairs, slab, _, _ = _find(mesh.faces, x, None, node, half, slab=True, cell_size_factor=1.5)

@@ -11,7 +11,7 @@ import warp as wp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pscc.collision.spatial_hash import SpatialHash
+from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh import folded_sheet, grid_sheet
 
@@ -431,6 +431,6 @@ def test_long_faces_leave_the_mean_but_not_the_grid(device: str) -> None:
     hash_ = _check_exact(device, lower, upper, None)
     assert hash_.stats.long_faces == 20 and hash_.stats.wide_faces == 0
     mean_length = ((upper[20:].astype(np.float64) - lower[20:]).mean(axis=1)).mean()
-    assert hash_.stats.cell_size == pytest.approx(2.5 * mean_length, rel=1e-6)
+    assert hash_.stats.cell_size == pytest.approx(DEFAULT_CELL_SIZE_FACTOR * mean_length, rel=1e-6)
     fixed = _check_exact(device, lower, upper, None, cell_size=0.5)
     assert fixed.stats.long_faces == 0 and fixed.stats.cell_size == 0.5
