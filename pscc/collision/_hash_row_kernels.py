@@ -53,7 +53,7 @@ from pscc.collision.shared_vertex import (
     shares_vertex,
 )
 from pscc.geometry.aabb import boxes_overlap
-from pscc.geometry.dop import diagonal_slabs_overlap
+from pscc.geometry.dop import diagonal_slabs_overlap, vec10
 
 
 @wp.func
@@ -623,22 +623,44 @@ def _write_entry_codes(
 
 
 @wp.func
+def face_pair_test(
+    fa: int,
+    fb: int,
+    diagonals_on: int,
+    diagonal_lower: wp.array(dtype=vec10),
+    diagonal_upper: wp.array(dtype=vec10),
+    mode: int,
+    faces: wp.array(dtype=wp.vec3i),
+    x0: wp.array(dtype=wp.vec3),
+    x1: wp.array(dtype=wp.vec3),
+    swept: int,
+    margin: float,
+) -> bool:
+    """:func:`face_pair_kept` with the structs' members passed one by one (a kernel that tests many pairs
+    reads them out of the structs once: on the CPU a struct passed on copies every array header it holds)."""
+    if mode == SHARED_SKIP:
+        if shares_vertex(faces[fa], faces[fb]):
+            return False
+    if mode == SHARED_CERTIFY:
+        ta = faces[fa]
+        tb = faces[fb]
+        if shares_vertex(ta, tb):
+            # Faces that share a vertex always pass the diagonal slabs (both hold its projections, computed
+            # alike): only the certificate can drop them.
+            return not certified_in(x0, x1, swept, margin, ta, tb)
+    if diagonals_on != 0:
+        if not diagonal_slabs_overlap(diagonal_lower[fa], diagonal_upper[fa], diagonal_lower[fb], diagonal_upper[fb]):
+            return False
+    return True
+
+
+@wp.func
 def face_pair_kept(fa: int, fb: int, diagonals: DiagonalArgs, shared: SharedVertexArgs) -> bool:
     """The tests of a face pair after its boxes overlap: a shared vertex (``shared.mode`` skip), the
-    diagonal slabs (``diagonals.enabled``), then the shared-vertex certificate (``shared.mode`` certify)."""
-    if shared.mode == SHARED_SKIP:
-        if shares_vertex(shared.faces[fa], shared.faces[fb]):
-            return False
-    if diagonals.enabled != 0:
-        if not diagonal_slabs_overlap(diagonals.lower[fa], diagonals.upper[fa], diagonals.lower[fb],
-                                      diagonals.upper[fb]):
-            return False
-    if shared.mode == SHARED_CERTIFY:
-        ta = shared.faces[fa]
-        tb = shared.faces[fb]
-        if shares_vertex(ta, tb):
-            return not certified_in(shared.positions_t0, shared.positions_t1, shared.swept, shared.margin, ta, tb)
-    return True
+    shared-vertex certificate (``shared.mode`` certify), else the diagonal slabs (``diagonals.enabled``),
+    which faces that share a vertex always pass."""
+    return face_pair_test(fa, fb, diagonals.enabled, diagonals.lower, diagonals.upper, shared.mode, shared.faces,
+                          shared.positions_t0, shared.positions_t1, shared.swept, shared.margin)
 
 
 @wp.func
@@ -704,6 +726,15 @@ masks, 64 at a time (:mod:`pscc.collision._code_mask_kernels`; the same entries 
     row_scan = tables.row_scan
     entry_code = tables.entry_code
     code_masks = tables.code_masks
+    diagonals_on = diagonals.enabled
+    diagonal_lower = diagonals.lower
+    diagonal_upper = diagonals.upper
+    shared_mode = shared.mode
+    shared_faces = shared.faces
+    shared_x0 = shared.positions_t0
+    shared_x1 = shared.positions_t1
+    shared_swept = shared.swept
+    shared_margin = shared.margin
     mask_min_run = tables.mask_min_run
     use_codes = info[_CELL_CODES] != wp.int64(0)
     r = _find_row(row_scan, int(info[_LIVE_ROWS]), k)
@@ -769,7 +800,8 @@ masks, 64 at a time (:mod:`pscc.collision._code_mask_kernels`; the same entries 
                 token = cell_of_point(wp.max(lower_a, lower_b), state.origin, state.cell_size)
                 emit = linear_cell_id(token, state.dims) == row_cell
             if emit:
-                emit = face_pair_kept(fa, fb, diagonals, shared)
+                emit = face_pair_test(fa, fb, diagonals_on, diagonal_lower, diagonal_upper, shared_mode, shared_faces,
+                                      shared_x0, shared_x1, shared_swept, shared_margin)
             if emit:
                 slot = wp.atomic_add(counts, 0, wp.int64(1))
                 if slot < capacity:

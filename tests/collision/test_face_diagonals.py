@@ -201,3 +201,29 @@ def test_defaults_and_bad_arguments() -> None:
     with pytest.raises(InputError, match="face_diagonal_upper"):
         hash_.find_pairs(boxes.face_lower, boxes.face_upper, face_diagonal_lower=boxes.face_diagonal_lower,
                          face_diagonal_upper=boxes.face_lower)
+
+
+@pytest.mark.parametrize("continuous", [False, True])
+@pytest.mark.parametrize("offset", [0.0, 1e4])
+def test_faces_that_share_a_vertex_always_overlap(continuous: bool, offset: float) -> None:
+    """The hash's face test skips the diagonal slabs for faces that share a vertex (only the certificate can
+    drop those): both faces' boxes and slabs hold that vertex's own projections, computed alike, so they always
+    overlap, on a jittered mesh far from the origin and over a step, at distance 0 too."""
+    mesh = folded_sheet(800, layers=2, seed=3)
+    rng = np.random.default_rng(1)
+    x0 = (mesh.vertices + rng.normal(scale=0.02, size=mesh.vertices.shape) + offset).astype(np.float32)
+    x1 = (x0 + rng.normal(scale=0.05, size=x0.shape)).astype(np.float32) if continuous else None
+    faces = mesh.faces
+    for half in (0.0, 0.01):
+        boxes = _slabs(faces, x0, x1, half)
+        lower, upper = boxes.face_lower.numpy(), boxes.face_upper.numpy()
+        dl, du = boxes.face_diagonal_lower.numpy(), boxes.face_diagonal_upper.numpy()
+        incident: dict[int, list[int]] = {}
+        for f, tri in enumerate(faces):
+            for v in tri:
+                incident.setdefault(int(v), []).append(f)
+        a, b = zip(*[(p, q) for fs in incident.values() for i, p in enumerate(fs) for q in fs[i + 1:]], strict=True)
+        a, b = np.array(a), np.array(b)
+        assert a.size > 3 * faces.shape[0]
+        assert np.all((lower[a] <= upper[b]) & (lower[b] <= upper[a]))
+        assert np.all((dl[a] <= du[b]) & (dl[b] <= du[a]))
