@@ -12,7 +12,6 @@ kernel                                   one thread per
 ``_gather_row_info``                     (single thread) row count, the tests each test thread runs,
                                          whether the test pass reads cell codes
 ``_write_rows``                          group slot: its rows and the BV tests of each
-``_write_entry_codes``                   entry slot: its cell code (when the test pass reads them)
 ``_write_code_masks``                    block of 64 entry slots: its code masks (`_code_mask_kernels`)
 ``_test_bounding_volumes``               test thread: a contiguous chunk of the BV tests
 =======================================  =============================================================
@@ -40,6 +39,7 @@ from pscc.collision._spatial_hash_kernels import (
     GridState,
     SlabArgs,
     TableArgs,
+    cell_code,
     cell_of_point,
     key_cell,
     linear_cell_id,
@@ -506,34 +506,12 @@ def _update_slab_policy(
 
 
 @wp.func
-def cell_fraction_code(t: float, cell: int) -> wp.uint32:
-    """1 + the fifteenth of cell ``cell`` (one axis) that holds the grid coordinate ``t`` ((p - origin)
-    times 1 / cell_size), clamped to [1, 15]. Non-decreasing in t for a fixed cell: a float32
-    subtraction of a constant, a float32 product with the positive constant 15, floor and clamp are all
-    monotone, so two entries of one cell whose float32 intervals overlap get codes that overlap."""
-    q = wp.floor((t - float(cell)) * 15.0)
-    return wp.uint32(int(wp.clamp(q + 1.0, 1.0, 15.0)))
-
-
-@wp.func
-def lower_end_code(lower_cell: int, t: float, cell: int) -> wp.uint32:
-    """The code of a box's lower end on one axis in cell ``cell``: 0 when the box starts in an earlier
-    cell (``lower_cell``, from :func:`cell_of_point`, below ``cell``), else ``cell_fraction_code``.
-    0 is below every code of an end inside the cell, so the order of ends is kept."""
-    if lower_cell < cell:
-        return wp.uint32(0)
-    return cell_fraction_code(t, cell)
-
-
-@wp.func
 def entry_cell_code(
     key: wp.int64, node_bits: int, lower: wp.vec3, upper: wp.vec3, state: GridState
 ) -> wp.uint32:
-    """The box [lower, upper] inside the cell of entry key ``key``: each end of each axis as a fifteenth
-    of the cell (``cell_fraction_code``, 1-15), a lower end in an earlier cell as 0 (``lower_end_code``),
-    packed as 5-bit fields: upper x, y, z in bits 0-14, lower x, y, z in bits 15-29 (bit 4 of every field
-    clear: the guard of the test pass's packed comparison). A lower field is non-zero exactly when the box
-    starts in this cell on that axis, which decides the token rule (``codes_hold_token``)."""
+    """The cell code (:func:`pscc.collision._spatial_hash_kernels.cell_code`) of the box [lower, upper] in
+    the cell of entry key ``key``: what ``_fill_entries`` stores with the entry, from the key alone (for
+    checks; the fill knows the cell's coordinates)."""
     cell = int(key_cell(key, node_bits))  # < 2^31 (MAX_GRID_CELLS)
     nz = state.dims[2]
     ny = state.dims[1]
@@ -545,12 +523,7 @@ def entry_cell_code(
     lo = (lower - state.origin) * scale
     hi = (upper - state.origin) * scale
     first = cell_of_point(lower, state.origin, state.cell_size)
-    code = cell_fraction_code(hi[0], cx)
-    code = code | (cell_fraction_code(hi[1], cy) << wp.uint32(5))
-    code = code | (cell_fraction_code(hi[2], cz) << wp.uint32(10))
-    code = code | (lower_end_code(first[0], lo[0], cx) << wp.uint32(15))
-    code = code | (lower_end_code(first[1], lo[1], cy) << wp.uint32(20))
-    return code | (lower_end_code(first[2], lo[2], cz) << wp.uint32(25))
+    return cell_code(wp.vec3i(cx, cy, cz), first, lo, hi)
 
 
 _ALL_BITS = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
@@ -577,7 +550,7 @@ def cell_codes_overlap(minuend_a: wp.uint32, subtrahend_a: wp.uint32, code_b: wp
     """Whether the cell codes of entries a and b overlap on every axis: upper_b >= lower_a in fields
     0-2 and upper_a >= lower_b in fields 3-5, in one subtraction (each field is at most 15 and its guard
     bit 16, so no field borrows from the next; the guard stays set exactly where the minuend field is
-    the larger). False only when the boxes' float32 test fails as well (``cell_fraction_code`` is
+    the larger). False only when the boxes' float32 test fails as well (the fraction codes are
     monotone)."""
     difference = ((code_b & CODE_UPPER_BITS) | minuend_a) - (subtrahend_a | (code_b & CODE_LOWER_BITS))
     return (difference & CODE_GUARDS) == CODE_GUARDS
@@ -598,28 +571,6 @@ def codes_hold_token(code_a: wp.uint32, code_b: wp.uint32) -> bool:
     either = code_a | code_b
     return (either & CODE_LOWER_X) != wp.uint32(0) and (either & CODE_LOWER_Y) != wp.uint32(0) and (
         either & CODE_LOWER_Z) != wp.uint32(0)
-
-
-@wp.kernel
-def _write_entry_codes(
-    # in:
-    entry_key: wp.array(dtype=wp.int64),
-    entry_face: wp.array(dtype=wp.int32),
-    face_lower: wp.array(dtype=wp.vec3),
-    face_upper: wp.array(dtype=wp.vec3),
-    grid: wp.array(dtype=GridState),
-    node_bits: int,
-    info: wp.array(dtype=wp.int64),
-    # out:
-    entry_code: wp.array(dtype=wp.uint32),
-):
-    """One thread per entry slot: a live entry's ``entry_cell_code``, when ``_gather_row_info`` chose
-    the codes for this call (else nothing)."""
-    i = wp.tid()
-    if info[_CELL_CODES] == wp.int64(0) or wp.int64(i) >= info[_LIVE_ENTRIES]:
-        return
-    f = entry_face[i]
-    entry_code[i] = entry_cell_code(entry_key[i], node_bits, face_lower[f], face_upper[f], grid[0])
 
 
 @wp.func

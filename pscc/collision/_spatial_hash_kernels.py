@@ -548,6 +548,43 @@ def _check_grid(
     loop_flag[0] = flag
 
 
+@wp.func
+def cell_fraction_code(t: float, cell: int) -> wp.uint32:
+    """1 + the fifteenth of cell ``cell`` (one axis) that holds the grid coordinate ``t`` ((p - origin)
+    times 1 / cell_size), clamped to [1, 15]. Non-decreasing in t for a fixed cell: a float32
+    subtraction of a constant, a float32 product with the positive constant 15, floor and clamp are all
+    monotone, so two entries of one cell whose float32 intervals overlap get codes that overlap."""
+    q = wp.floor((t - float(cell)) * 15.0)
+    return wp.uint32(int(wp.clamp(q + 1.0, 1.0, 15.0)))
+
+
+@wp.func
+def lower_end_code(lower_cell: int, t: float, cell: int) -> wp.uint32:
+    """The code of a box's lower end on one axis in cell ``cell``: 0 when the box starts in an earlier
+    cell (``lower_cell``, from :func:`cell_of_point`, below ``cell``), else ``cell_fraction_code``.
+    0 is below every code of an end inside the cell, so the order of ends is kept."""
+    if lower_cell < cell:
+        return wp.uint32(0)
+    return cell_fraction_code(t, cell)
+
+
+@wp.func
+def cell_code(cell: wp.vec3i, first: wp.vec3i, lo: wp.vec3, hi: wp.vec3) -> wp.uint32:
+    """The cell code of a box in cell ``cell`` (coordinates), given the cell of its lower corner
+    (``first``) and its ends in grid coordinates (``lo``, ``hi`` = (end - origin) x (1 / cell_size)):
+    each end of each axis as a fifteenth of the cell (``cell_fraction_code``, 1-15), a lower end in an
+    earlier cell as 0 (``lower_end_code``), packed as 5-bit fields: upper x, y, z in bits 0-14, lower
+    x, y, z in bits 15-29 (bit 4 of every field clear: the guard of the test pass's packed comparison). A
+    lower field is non-zero exactly when the box starts in this cell on that axis, which decides the
+    token rule (:func:`pscc.collision._hash_row_kernels.codes_hold_token`)."""
+    code = cell_fraction_code(hi[0], cell[0])
+    code = code | (cell_fraction_code(hi[1], cell[1]) << wp.uint32(5))
+    code = code | (cell_fraction_code(hi[2], cell[2]) << wp.uint32(10))
+    code = code | (lower_end_code(first[0], lo[0], cell[0]) << wp.uint32(15))
+    code = code | (lower_end_code(first[1], lo[1], cell[1]) << wp.uint32(20))
+    return code | (lower_end_code(first[2], lo[2], cell[2]) << wp.uint32(25))
+
+
 @wp.kernel
 def _fill_entries(
     # in:
@@ -563,11 +600,12 @@ def _fill_entries(
     info: wp.array(dtype=wp.int64),
     # out:
     keys: wp.array(dtype=wp.int64),
-    faces: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.int64),
 ):
     """One thread per face position k (as in ``_count_face_cells``): its entries at slot k of the exclusive
-    scan of cell counts (entries in face-position order); nothing when the entries do not fit or the
-    face is wide."""
+    scan of cell counts (entries in face-position order), each value the face and, in the high 32 bits,
+    its box's cell code in that cell (:func:`cell_code`; the sort carries it along); nothing when the
+    entries do not fit or the face is wide."""
     k = wp.tid()
     if info[_LIVE_ENTRIES] == wp.int64(0) or face_cells[k] == wp.int64(0):
         return  # the entries do not fit, or a wide face
@@ -575,15 +613,22 @@ def _fill_entries(
     if ordered != 0:
         f = face_order[k]
     state = grid[0]
-    lo = cell_of_point(face_lower[f], state.origin, state.cell_size)
-    hi = cell_of_point(face_upper[f], state.origin, state.cell_size)
+    lower = face_lower[f]
+    upper = face_upper[f]
+    lo = cell_of_point(lower, state.origin, state.cell_size)
+    hi = cell_of_point(upper, state.origin, state.cell_size)
+    scale = 1.0 / state.cell_size
+    lo_t = (lower - state.origin) * scale
+    hi_t = (upper - state.origin) * scale
     node = node_id[f]
     slot = int(face_end[k] - face_cells[k])
     for x in range(lo[0], hi[0] + 1):
         for y in range(lo[1], hi[1] + 1):
             for z in range(lo[2], hi[2] + 1):
-                keys[slot] = entry_key(linear_cell_id(wp.vec3i(x, y, z), state.dims), node, node_bits)
-                faces[slot] = f
+                cell = wp.vec3i(x, y, z)
+                keys[slot] = entry_key(linear_cell_id(cell, state.dims), node, node_bits)
+                code = cell_code(cell, lo, lo_t, hi_t)
+                values[slot] = (wp.int64(code) << wp.int64(32)) | wp.int64(f)
                 slot += 1
 
 
@@ -594,14 +639,14 @@ def _pad_entries(
     pad_key: wp.int64,
     # out:
     keys: wp.array(dtype=wp.int64),
-    faces: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.int64),
 ):
     """One thread per entry slot: slots past the live entries get the largest key (sorted last)."""
     i = wp.tid()
     if wp.int64(i) < info[_LIVE_ENTRIES]:
         return
     keys[i] = pad_key
-    faces[i] = 0
+    values[i] = wp.int64(0)
 
 
 @wp.kernel

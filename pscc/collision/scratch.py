@@ -37,6 +37,15 @@ def view(buffer: wp.array, byte_offset: int, count: int, dtype: type) -> wp.arra
     return result
 
 
+def strided_view(buffer: wp.array, byte_offset: int, count: int, dtype: type, stride: int) -> wp.array:
+    """``count`` values of ``dtype``, one every ``stride`` bytes from ``byte_offset`` bytes into ``buffer``'s
+    memory (a view, e.g. one half of each 8-byte value of an int64 array)."""
+    result = wp.array(ptr=buffer.ptr + byte_offset, dtype=dtype, shape=(count,), strides=(stride,),
+                      device=buffer.device)
+    result._buffer = buffer
+    return result
+
+
 @dataclass(frozen=True)
 class Lender:
     """A buffer whose memory a borrower may use between the lender's own uses.

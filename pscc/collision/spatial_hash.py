@@ -39,16 +39,17 @@ grid                       (1,) GridState        origin, cell size, dims and sla
 loop_flag                  (1,) int32            condition of the grid loop (``wp.capture_while``)
 face_cells / face_end      (face_count,) int64   cells a face's box overlaps / inclusive scan (entry ends);
                                                  face_cells first holds the ``face_order`` marks
-entry_key / entry_face     (2 E,) int64 / int32  {cell, node} key and face of each entry, sorted by key
-                                                 (the whole capacity is sorted: unused slots hold the
-                                                 largest key; the second half is radix-sort scratch)
+entry_key / entry_value    (2 E,) int64 / int64  {cell, node} key of each entry, and its face (low 32 bits) and
+                                                 cell code (high 32 bits: its box ends as fifteenths of its
+                                                 cell, written by the fill), sorted by key (the whole capacity
+                                                 is sorted: unused slots hold the largest key; the second half
+                                                 is radix-sort scratch); ``entry_face`` / ``entry_code`` are
+                                                 strided views of the two halves
 group_rank / cell_rank     (E,) int32            1-based group / cell of each sorted entry (scans of heads)
 group_start / group_end    (E,) / (G,) int32     entry range of group g (triangleHashTable row g);
                                                  group_start first holds the run-head flags
 group_cell                 (G,) int32            cell rank of group g (workLoadHashTable row of g)
 cell_end                   (E,) int32            one past the last entry of cell c (first the cell-head flags)
-entry_code                 (E,) uint32           cell code of each sorted entry: its box ends as fifteenths
-                                                 of its cell (written only when the call uses the codes)
 code_masks                 (96 ceil(E / 64),)    per block of 64 sorted entries, per axis and quantised end,
                            uint64                the entries whose lower end is at most / upper end at least
                                                  it (:mod:`pscc.collision._code_mask_kernels`; with the codes)
@@ -107,7 +108,15 @@ from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision import _wide_face_kernels as wide_kernels
 from pscc.collision import shared_vertex
 from pscc.collision.hash_arguments import check_face_array, diagonal_args, shared_args, slab_args
-from pscc.collision.scratch import Lender, TableSpec, check_lender, place_tables, scratch_lenders, view
+from pscc.collision.scratch import (
+    Lender,
+    TableSpec,
+    check_lender,
+    place_tables,
+    scratch_lenders,
+    strided_view,
+    view,
+)
 from pscc.collision.spatial_hash_settings import (
     CELL_CODE_MIN_TESTS,
     CODE_MASK_MIN_RUN,
@@ -451,8 +460,7 @@ class SpatialHash:
         rows = getattr(self, "row_capacity", 1)
         # Sorting the pairs needs twice the slots (radix-sort scratch) and a key per pair.
         pair_slots = 2 * getattr(self, "pair_capacity", 1) if self.sort_pairs else getattr(self, "pair_capacity", 1)
-        tables = [TableSpec("entry_key", 2 * n, wp.int64), TableSpec("entry_face", 2 * n, wp.int32),
-                  TableSpec("entry_code", n, wp.uint32),
+        tables = [TableSpec("entry_key", 2 * n, wp.int64), TableSpec("entry_value", 2 * n, wp.int64),
                   TableSpec("code_masks", mask_kernels.block_count(n) * mask_kernels.WORDS_PER_BLOCK, wp.uint64),
                   TableSpec("cell_end", n, wp.int32), TableSpec("group_end", g, wp.int32),
                   TableSpec("group_cell", g, wp.int32), TableSpec("row_span", rows, wp.vec3i),
@@ -473,8 +481,11 @@ class SpatialHash:
         # (views, not allocations: 12 bytes per entry slot less).
         self.group_rank = view(self.entry_key, 8 * n, n, wp.int32)
         self.cell_rank = view(self.entry_key, 12 * n, n, wp.int32)
+        # Each sorted value is the entry's face (low half) and its cell code (high half, little-endian).
+        self.entry_face = strided_view(self.entry_value, 0, n, wp.int32, 8)
+        self.entry_code = strided_view(self.entry_value, 4, n, wp.uint32, 8)
         # group_start / cell_end first hold the head flags that are scanned into the ranks.
-        self.group_start = view(self.entry_face, 4 * n, n, wp.int32)
+        self.group_start = view(self.entry_value, 8 * n, n, wp.int32)
         # The rank buffers are free once the tables are written: they hold the rows per group (views made
         # here, when the tables are placed, so the device path makes none).
         self.row_count = self.group_rank[:g]
@@ -492,7 +503,7 @@ class SpatialHash:
                  "chunk_long_count", "wide_faces",
                  "scene", "grid", "loop_flag",
                  "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
-                 "slab_policy", "faces", "entry_key", "entry_face", "entry_code", "code_masks", "cell_end",
+                 "slab_policy", "faces", "entry_key", "entry_value", "code_masks", "cell_end",
                  "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "group_sphere",
                  "row_span",
                  "row_work",
@@ -943,14 +954,14 @@ class SpatialHash:
         wp.launch(kernels._fill_entries, dim=self.face_count,
                   inputs=[face_lower, face_upper, node_id, self.face_cells, self.face_end, self.grid, node_bits,
                           order, int(ordered), self.info],
-                  outputs=[self.entry_key, self.entry_face], device=dev)
+                  outputs=[self.entry_key, self.entry_value], device=dev)
         end_bit = node_bits + self.cell_bits
         wp.launch(kernels._pad_entries, dim=self.entry_capacity, inputs=[self.info, (1 << end_bit) - 1],
-                  outputs=[self.entry_key, self.entry_face], device=dev)
+                  outputs=[self.entry_key, self.entry_value], device=dev)
         # A stable sort on the cell bits keeps the fill order inside each cell; when that order keeps
         # each node's faces together, the node bits need no sorting.
         first_bit = node_bits if grouped_fill else 0
-        wp.utils.radix_sort_pairs(self.entry_key, self.entry_face, self.entry_capacity, first_bit, end_bit)
+        wp.utils.radix_sort_pairs(self.entry_key, self.entry_value, self.entry_capacity, first_bit, end_bit)
 
     def _build_tables(self, face_lower: wp.array, face_upper: wp.array, node_bits: int, slab: kernels.SlabArgs,
                       check_keys: int) -> None:
@@ -988,9 +999,6 @@ class SpatialHash:
                           self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info],
                   outputs=[self.row_span, self.row_work], device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
-        wp.launch(row_kernels._write_entry_codes, dim=n,
-                  inputs=[self.entry_key, self.entry_face, face_lower, face_upper, self.grid, node_bits, self.info],
-                  outputs=[self.entry_code], device=dev)
         wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
                   outputs=[self.code_masks], device=dev)
 

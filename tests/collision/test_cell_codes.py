@@ -20,7 +20,7 @@ from pscc.collision._hash_row_kernels import (
     codes_hold_token,
     entry_cell_code,
 )
-from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, GridState, cell_of_point
+from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, INFO_LIVE_ENTRIES, GridState, cell_of_point
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.spatial_hash import CELL_CODE_MIN_TESTS, SpatialHash
 from pscc.errors import InputError
@@ -292,3 +292,42 @@ def test_detector_pairs_do_not_change(method: str, continuous: bool) -> None:
 def test_bad_min_tests(bad: object) -> None:
     with pytest.raises(InputError, match="cell_code_min_tests"):
         SpatialHash(10, DEVICE, cell_code_min_tests=bad)
+
+
+@wp.kernel
+def _codes_from_keys(
+    keys: wp.array(dtype=wp.int64),
+    entry_face: wp.array(dtype=wp.int32),
+    lower: wp.array(dtype=wp.vec3),
+    upper: wp.array(dtype=wp.vec3),
+    grid: wp.array(dtype=GridState),
+    node_bits: int,
+    out: wp.array(dtype=wp.uint32),
+):
+    i = wp.tid()
+    f = entry_face[i]
+    out[i] = entry_cell_code(keys[i], node_bits, lower[f], upper[f], grid[0])
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e5])
+def test_codes_written_by_the_fill_match_the_keys(offset: float) -> None:
+    """The fill stores each entry's code with its face (the sort carries both); decoded from the sorted key
+    alone, every live entry's code is the same, for boxes across many cells and far from the origin."""
+    rng = np.random.default_rng(5)
+    m = 600
+    lower = (np.float32(offset) + rng.uniform(0.0, 5.0, size=(m, 3))).astype(np.float32)
+    upper = (lower + rng.uniform(0.0, 1.2, size=(m, 3))).astype(np.float32)
+    hash_ = SpatialHash(m, DEVICE, cell_code_min_tests=0)
+    lower_wp = wp.array(lower, dtype=wp.vec3, device=DEVICE)
+    upper_wp = wp.array(upper, dtype=wp.vec3, device=DEVICE)
+    hash_.find_pairs(lower_wp, upper_wp, None, 0.7)
+    entries = int(hash_.info.numpy()[INFO_LIVE_ENTRIES])
+    assert entries > 2 * m
+    out = wp.zeros(entries, dtype=wp.uint32, device=DEVICE)
+    wp.launch(_codes_from_keys, dim=entries, device=DEVICE,
+              inputs=[hash_.entry_key, hash_.entry_face, lower_wp, upper_wp, hash_.grid, (m - 1).bit_length()],
+              outputs=[out])
+    stored = hash_.entry_code.numpy()[:entries]
+    np.testing.assert_array_equal(stored, out.numpy())
+    np.testing.assert_array_equal(np.sort(hash_.entry_face.numpy()[:entries]),
+                                  np.sort(np.repeat(np.arange(m), hash_.face_cells.numpy()[:m])))
