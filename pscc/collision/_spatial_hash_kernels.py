@@ -18,7 +18,8 @@ kernel                                   one thread per
 ``_count_face_cells``                    face (grid loop body): cells its box overlaps, grid extent
 ``_check_grid``                          (single thread, loop body) doubles the cell size while the
                                          entries or the grid are too big, else ends the loop
-``_fill_entries``                        face: its (key, face) entries, one per overlapped cell
+``_fill_entries``                        face: its (key, face and cell code) entries, one per overlapped
+                                         cell
 ``_pad_entries``                         entry slot: unused slots get the largest key (sorted last)
 ``_mark_runs`` / ``_write_tables``       entry slot: head flags / group ranges, group cell, cell ends
 ``_gather_table_info``                   (single thread) group and cell counts
