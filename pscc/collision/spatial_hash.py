@@ -139,6 +139,7 @@ from pscc.collision.spatial_hash_settings import (
     WIDE_FACE_MIN_CELLS,
     WIDE_FACE_SHARE,
     SpatialHashStats,
+    check_integer,
     check_positive,
 )
 from pscc.errors import CapacityError, InputError
@@ -253,53 +254,32 @@ class SpatialHash:
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
         self.group_slab_test = bool(group_slab_test)
-        if isinstance(slab_min_work, bool) or not isinstance(slab_min_work, int | np.integer) or slab_min_work < 1:
-            raise InputError("argument", "slab_min_work", f"{slab_min_work!r} is not an integer >= 1",
-                             "pass a positive integer such as 8")
-        self.slab_min_work = int(slab_min_work)
-        if (isinstance(slab_exact_min_work, bool) or not isinstance(slab_exact_min_work, int | np.integer)
-                or slab_exact_min_work < 1):
-            raise InputError("argument", "slab_exact_min_work", f"{slab_exact_min_work!r} is not an integer >= 1",
-                             "pass a positive integer such as 64")
-        self.slab_exact_min_work = int(slab_exact_min_work)
-        if isinstance(face_count, bool) or not isinstance(face_count, int | np.integer) or face_count < 0:
-            raise InputError("argument", "face_count", f"{face_count!r} is not an integer >= 0",
-                             "pass the number of faces")
+        self.slab_min_work = check_integer(slab_min_work, "slab_min_work", 1, None, "pass a positive integer such as 8")
+        self.slab_exact_min_work = check_integer(slab_exact_min_work, "slab_exact_min_work", 1, None,
+                                                 "pass a positive integer such as 64")
+        check_integer(face_count, "face_count", 0, None, "pass the number of faces")
         if face_count > MAX_ENTRIES:
             raise InputError("argument", "face_count", f"{face_count} faces exceed {MAX_ENTRIES}",
                              "split the scene into several hashes")
-        if pair_capacity is not None and (isinstance(pair_capacity, bool) or not isinstance(pair_capacity, int)
-                                          or pair_capacity < 0):
-            raise InputError("argument", "pair_capacity", f"{pair_capacity!r} is not an integer >= 0",
-                             "pass a non-negative integer or None")
+        if pair_capacity is not None:
+            check_integer(pair_capacity, "pair_capacity", 0, None, "pass a non-negative integer or None")
         self.device = wp.get_device(device)
         self._scan = PrefixSum(self.device)  # allocation-free inside the grid loop (and a step's loop) on CUDA
         if tests_per_thread is None:
             tests_per_thread = 1 if self.device.is_cuda else 64
-        if isinstance(tests_per_thread, bool) or not isinstance(tests_per_thread, int) or tests_per_thread < 1:
-            raise InputError("argument", "tests_per_thread", f"{tests_per_thread!r} is not an integer >= 1",
-                             "pass a positive integer or None")
-        self.tests_per_thread = int(tests_per_thread)
-        if (isinstance(cell_code_min_tests, bool) or not isinstance(cell_code_min_tests, int | np.integer)
-                or not 0 <= cell_code_min_tests <= 2**31):
-            raise InputError("argument", "cell_code_min_tests",
-                             f"{cell_code_min_tests!r} is not an integer in [0, 2^31]",
-                             f"pass {CELL_CODE_MIN_TESTS} (the default), 0 to always use the codes or 2^31 to never")
-        self.cell_code_min_tests = int(cell_code_min_tests)
+        self.tests_per_thread = check_integer(tests_per_thread, "tests_per_thread", 1, None,
+                                              "pass a positive integer or None")
+        self.cell_code_min_tests = check_integer(
+            cell_code_min_tests, "cell_code_min_tests", 0, 2**31,
+            f"pass {CELL_CODE_MIN_TESTS} (the default), 0 to always use the codes or 2^31 to never")
         """BV tests per live entry from which a call compares cell codes first (:data:`CELL_CODE_MIN_TESTS`)."""
-        if (isinstance(code_mask_min_run, bool) or not isinstance(code_mask_min_run, int | np.integer)
-                or not 1 <= code_mask_min_run <= 2**31 - 1):
-            raise InputError("argument", "code_mask_min_run",
-                             f"{code_mask_min_run!r} is not an integer in [1, 2^31 - 1]",
-                             f"pass {CODE_MASK_MIN_RUN} (the default), 1 to always use the code masks or 2^31 - 1 "
-                             "to never")
-        self.code_mask_min_run = int(code_mask_min_run)
+        self.code_mask_min_run = check_integer(
+            code_mask_min_run, "code_mask_min_run", 1, 2**31 - 1,
+            f"pass {CODE_MASK_MIN_RUN} (the default), 1 to always use the code masks or 2^31 - 1 to never")
         """Row segments of at least this many entries find code-test passes through the code masks
         (:data:`CODE_MASK_MIN_RUN`)."""
-        if (isinstance(max_wide_faces, bool) or not isinstance(max_wide_faces, int | np.integer)
-                or not 0 <= max_wide_faces <= MAX_ENTRIES):
-            raise InputError("argument", "max_wide_faces", f"{max_wide_faces!r} is not an integer >= 0",
-                             f"pass {DEFAULT_MAX_WIDE_FACES} (the default) or 0 to insert every face in the grid")
+        check_integer(max_wide_faces, "max_wide_faces", 0, MAX_ENTRIES,
+                      f"pass {DEFAULT_MAX_WIDE_FACES} (the default) or 0 to insert every face in the grid")
         self.wide_capacity = min(int(max_wide_faces), int(face_count) // WIDE_FACE_SHARE)
         """Most wide faces a call uses (0: none): ``max_wide_faces``, at most face_count / 8."""
         self.wide_limit = float(max(WIDE_FACE_MIN_CELLS, face_count / WIDE_FACE_SHARE))
@@ -310,10 +290,8 @@ class SpatialHash:
         if self.max_mean_cells_per_face < 1.0:
             raise InputError("argument", "max_mean_cells_per_face", f"{max_mean_cells_per_face!r} < 1",
                              "pass a value >= 1 (every face overlaps at least one cell)")
-        if isinstance(tests_per_launch, bool) or not isinstance(tests_per_launch, int) or tests_per_launch < 1:
-            raise InputError("argument", "tests_per_launch", f"{tests_per_launch!r} is not an integer >= 1",
-                             "pass a positive integer such as 2**24")
-        self.tests_per_launch = tests_per_launch
+        self.tests_per_launch = check_integer(tests_per_launch, "tests_per_launch", 1, None,
+                                              "pass a positive integer such as 2**24")
         self.skip_adjacent = bool(skip_adjacent)
         m = self.face_count
         self.vertex_bound = 0
@@ -810,7 +788,7 @@ class SpatialHash:
         if wanted > 0:
             self.cell_bits = min(31, max(self.cell_bits + 1, (wanted - 1).bit_length()))
             fits = False
-        self._fill_stats(summary, info)
+        self.stats = SpatialHashStats.from_summary(summary, self.face_count, self._pair_reruns, self.device_bytes)
         self._pair_count = min(found, self.pair_capacity) if fits else 0
         if fits:
             self._pair_reruns = 0
@@ -832,35 +810,6 @@ class SpatialHash:
         if ordered and info[kernels.INFO_SAME_NODE] > 0:
             raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
                              "pass an order in which equal node ids are adjacent, or None")
-
-    def _fill_stats(self, summary: np.ndarray, info: np.ndarray) -> None:
-        """:attr:`stats` from the summary of the last device call."""
-        m = self.face_count
-        stats = SpatialHashStats(reruns=self._pair_reruns)
-        if m == 1:
-            stats.entries = stats.groups = stats.cells = 1
-            stats.mean_cells_per_face = 1.0
-        elif m >= 2:
-            stats.cell_size = float(summary[kernels.SUMMARY_CELL_SIZE])
-            stats.grid_dims = tuple(int(v) for v in info[kernels.SUMMARY_DIMS: kernels.SUMMARY_DIMS + 3])
-            stats.entries = int(info[kernels.INFO_ENTRIES])
-            stats.groups = int(info[kernels.INFO_GROUPS])
-            stats.cells = int(info[kernels.INFO_CELLS])
-            stats.rows = int(info[kernels.INFO_ROWS])
-            stats.face_tests = int(info[kernels.INFO_FACE_TESTS])
-            stats.slab_tests = int(info[kernels.INFO_SLAB_TESTS])
-            stats.bv_tests = stats.face_tests + stats.slab_tests
-            stats.same_node_tests = int(info[kernels.INFO_SAME_NODE])
-            stats.wide_faces = int(info[kernels.INFO_WIDE_FACES])
-            stats.wide_tests = int(info[kernels.INFO_WIDE_TESTS])
-            stats.wide_cell_size = float(summary[kernels.SUMMARY_WIDE_CELL])
-            stats.long_faces = int(info[kernels.INFO_LONG_FACES])
-            stats.bv_tests += stats.wide_tests
-            stats.triangle_pairs = int(info[kernels.SUMMARY_PAIRS])
-            stats.coarsenings = int(info[kernels.INFO_COARSENINGS])
-            stats.mean_cells_per_face = stats.entries / m
-        stats.device_bytes = self.device_bytes
-        self.stats = stats
 
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when

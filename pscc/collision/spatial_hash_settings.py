@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.errors import InputError
 
@@ -33,6 +35,7 @@ __all__ = [
     "WIDE_FACE_MIN_CELLS",
     "WIDE_FACE_SHARE",
     "SpatialHashStats",
+    "check_integer",
     "check_positive",
 ]
 
@@ -173,6 +176,46 @@ class SpatialHashStats:
     wide_cell_size: float = 0.0
     long_faces: int = 0
     device_bytes: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def from_summary(cls, summary: np.ndarray, face_count: int, reruns: int,
+                     device_bytes: dict[str, int]) -> SpatialHashStats:
+        """The stats of a call from the hash's summary array read back at its sync point (the ``info``
+        counters first, then the grid dims, cell size, pair count and wide cell)."""
+        stats = cls(reruns=reruns)
+        if face_count == 1:
+            stats.entries = stats.groups = stats.cells = 1
+            stats.mean_cells_per_face = 1.0
+        elif face_count >= 2:
+            stats.cell_size = float(summary[kernels.SUMMARY_CELL_SIZE])
+            stats.grid_dims = tuple(int(v) for v in summary[kernels.SUMMARY_DIMS: kernels.SUMMARY_DIMS + 3])
+            stats.entries = int(summary[kernels.INFO_ENTRIES])
+            stats.groups = int(summary[kernels.INFO_GROUPS])
+            stats.cells = int(summary[kernels.INFO_CELLS])
+            stats.rows = int(summary[kernels.INFO_ROWS])
+            stats.face_tests = int(summary[kernels.INFO_FACE_TESTS])
+            stats.slab_tests = int(summary[kernels.INFO_SLAB_TESTS])
+            stats.same_node_tests = int(summary[kernels.INFO_SAME_NODE])
+            stats.wide_faces = int(summary[kernels.INFO_WIDE_FACES])
+            stats.wide_tests = int(summary[kernels.INFO_WIDE_TESTS])
+            stats.wide_cell_size = float(summary[kernels.SUMMARY_WIDE_CELL])
+            stats.long_faces = int(summary[kernels.INFO_LONG_FACES])
+            stats.bv_tests = stats.face_tests + stats.slab_tests + stats.wide_tests
+            stats.triangle_pairs = int(summary[kernels.SUMMARY_PAIRS])
+            stats.coarsenings = int(summary[kernels.INFO_COARSENINGS])
+            stats.mean_cells_per_face = stats.entries / face_count
+        stats.device_bytes = device_bytes
+        return stats
+
+
+def check_integer(value: object, name: str, low: int, high: int | None, fix: str) -> int:
+    """``value`` as an int, or an InputError naming the argument ``name`` (with ``fix``) when it is not an
+    integer in [low, high] (``high`` None: no upper end). Booleans are refused."""
+    if (isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low
+            or (high is not None and value > high)):
+        bounds = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise InputError("argument", name, f"{value!r} is not an integer {bounds}", fix)
+    return int(value)
 
 
 def check_positive(value: float, name: str) -> float:
