@@ -37,7 +37,8 @@ WORDS_PER_BLOCK: int = 96
 """Mask words per block: 3 axes x (16 lower-end prefixes + 16 upper-end suffixes)."""
 
 _WORDS_PER_BLOCK = wp.constant(WORDS_PER_BLOCK)
-_ALL_BITS = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
+ALL_BITS = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
+"""A 64-bit word with every bit set."""
 
 _LOWEST_BIT_SNIPPET = """
 #if defined(__CUDA_ARCH__)
@@ -103,7 +104,7 @@ def code_mask_query(code_masks: wp.array(dtype=wp.uint64), block: int, code_a: w
     hold the token with it), as bits; entries of other cells in the block must be masked off by the
     caller."""
     base = block * _WORDS_PER_BLOCK
-    bits = _ALL_BITS
+    bits = ALL_BITS
     for k in range(3):
         upper = int((code_a >> wp.uint32(5 * k)) & wp.uint32(15))
         lower = int((code_a >> wp.uint32(15 + 5 * k)) & wp.uint32(15))

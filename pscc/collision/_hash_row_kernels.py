@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from pscc.collision._code_mask_kernels import code_mask_query, lowest_bit
+from pscc.collision._code_mask_kernels import ALL_BITS, code_mask_query, lowest_bit
 from pscc.collision._spatial_hash_kernels import (
     _CELL_CODES,
     _FACE_TESTS,
@@ -526,8 +526,6 @@ def entry_cell_code(
     return cell_code(wp.vec3i(cx, cy, cz), first, lo, hi)
 
 
-_ALL_BITS = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
-
 CODE_UPPER_BITS = wp.constant(wp.uint32(0x7FFF))
 CODE_LOWER_BITS = wp.constant(wp.uint32(0x3FFF8000))
 CODE_GUARDS = wp.constant(wp.uint32(0x21084210))  # bit 4 of each of the six 5-bit fields
@@ -727,7 +725,7 @@ masks, 64 at a time (:mod:`pscc.collision._code_mask_kernels`; the same entries 
                         if word != block:
                             block = word
                             block_bits = code_mask_query(code_masks, word, code_a)
-                        bits = block_bits & (_ALL_BITS << wp.uint64(entry_b & 63))
+                        bits = block_bits & (ALL_BITS << wp.uint64(entry_b & 63))
                         if bits != wp.uint64(0):
                             entry_b = wp.min(word * 64 + lowest_bit(bits), segment_end)
                             break
