@@ -15,7 +15,9 @@ owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge
 ========================  ===================  ==============================================
 
 Each triangle pair (a row of a row kernel, :mod:`pscc._lanes`) first meets the supporting-plane test
-of :mod:`pscc.collision.pair_filter`, per vertex (:func:`~pscc.collision.pair_filter.plane_sides`): the
+of :mod:`pscc.collision.pair_filter`, per vertex (discrete detection: against the per-face plane slabs
+of :mod:`pscc.collision.face_planes`, computed once per call; continuous:
+:func:`~pscc.collision.pair_filter.plane_sides`): the
 pair is dropped when one face's plane separates the other face; otherwise a vertex certified beyond the
 other face's plane, and an edge whose two ends are beyond it on one side, are left out of its feature
 pairs (none of them can come within the thickness). Of the rest, the feature pairs whose own boxes
@@ -43,6 +45,7 @@ from pscc._lanes import row_lanes
 from pscc.collision.boxes import PrimitiveBoxArgs
 from pscc.collision.candidates import CandidatePairs
 from pscc.collision.device_topology import DeviceTopology
+from pscc.collision.face_planes import FacePlane, FacePlanes, slab_sides
 from pscc.collision.pair_filter import plane_sides, sides_agree
 from pscc.collision.seams import SeamAdjacency, SeamArgs, stitched, stitched_to_face
 from pscc.geometry.aabb import boxes_overlap
@@ -72,22 +75,24 @@ def _shares_vertex(f: wp.vec3i, v: int) -> bool:
 
 
 @wp.func
-def _owned_vertex_mask(faces: wp.array(dtype=wp.vec3i), owned_vertex_bits: wp.array(dtype=wp.int32),
-                       boxes: PrimitiveBoxArgs, seams: SeamArgs, owner: int, other: int) -> int:
-    """Bit k: vertex k of face ``owner`` is owned by it, is not a vertex of face ``other`` nor stitched to
-    one, and its box overlaps the box of ``other``."""
-    tri = faces[owner]
-    target = faces[other]
-    bits = owned_vertex_bits[owner]
-    other_lower = boxes.face_lower[other]
-    other_upper = boxes.face_upper[other]
+def _owned_vertex_mask(tri: wp.vec3i, target: wp.vec3i, candidates: int, other_lower: wp.vec3, other_upper: wp.vec3,
+                       vertex_lower: wp.array(dtype=wp.vec3), vertex_upper: wp.array(dtype=wp.vec3),
+                       seams: SeamArgs, has_seams: bool) -> int:
+    """Bit k: bit k of ``candidates`` is set (the face owns its vertex k, and the vertex is not certified
+    beyond the other face's plane), vertex k of face ``tri`` is not a vertex of face ``target`` nor
+    stitched to one, and its box overlaps the other face's box [``other_lower``, ``other_upper``]."""
     mask = int(0)
     for k in range(3):
-        if (bits >> k) & 1:
+        if (candidates >> k) & 1:
             v = tri[k]
-            if not _shares_vertex(target, v) and not stitched_to_face(seams, v, target):
-                if boxes_overlap(boxes.vertex_lower[v], boxes.vertex_upper[v], other_lower, other_upper):
-                    mask = mask | (1 << k)
+            # Nested ifs: Warp evaluates both operands of ``and``.
+            if not _shares_vertex(target, v):
+                keep = True
+                if has_seams:
+                    keep = not stitched_to_face(seams, v, target)
+                if keep:
+                    if boxes_overlap(vertex_lower[v], vertex_upper[v], other_lower, other_upper):
+                        mask = mask | (1 << k)
     return mask
 
 
@@ -123,6 +128,8 @@ class PlaneTestArgs:
     thickness: wp.float32
     factor: wp.float32
     params: CcdParameters
+    face_planes: wp.array(dtype=FacePlane)
+    use_face_planes: wp.int32
 
 
 @wp.struct
@@ -166,27 +173,47 @@ def _extract_features(
     owned_edge_bits = topology.owned_edge_bits
     seams = topology.seams
     has_seams = seams.offsets.shape[0] > 1
+    face_planes = planes.face_planes
+    positions = planes.positions_t0
+    use_face_planes = planes.use_face_planes
+    object_ids = planes.object_ids
+    vertex_lower = boxes.vertex_lower
+    vertex_upper = boxes.vertex_upper
+    edge_lower = boxes.edge_lower
+    edge_upper = boxes.edge_upper
+    face_lower = boxes.face_lower
+    face_upper = boxes.face_upper
     rows = int(wp.min(pair_counts[0], wp.int64(triangle_pairs.shape[0])))
     for i in range(wp.tid(), rows, lanes):
         pair = triangle_pairs[i]
         a = pair[0]
         b = pair[1]
-        same_object = planes.object_ids[a] == planes.object_ids[b]
+        same_object = object_ids[a] == object_ids[b]
         if same_object:
             wp.atomic_add(pair_stats, 2, 1)
         tri_a = faces[a]
         tri_b = faces[b]
         # The supporting-plane test (pscc.collision.pair_filter), per vertex: the sides of b's vertices
         # with respect to a's plane and of a's with respect to b's.
-        sides_b = plane_sides(tri_a, tri_b, planes.positions_t0, planes.positions_t1, planes.swept,
-                              planes.thickness, planes.factor, planes.params)
-        sides_a = plane_sides(tri_b, tri_a, planes.positions_t0, planes.positions_t1, planes.swept,
-                              planes.thickness, planes.factor, planes.params)
+        sides_a = wp.vec3(0.0)
+        sides_b = wp.vec3(0.0)
+        if use_face_planes != 0:
+            plane_a = face_planes[a]
+            plane_b = face_planes[b]
+            sides_b = slab_sides(plane_a, plane_b, positions[tri_b[0]], positions[tri_b[1]], positions[tri_b[2]])
+            sides_a = slab_sides(plane_b, plane_a, positions[tri_a[0]], positions[tri_a[1]], positions[tri_a[2]])
+        else:
+            sides_b = plane_sides(tri_a, tri_b, planes.positions_t0, planes.positions_t1, planes.swept,
+                                  planes.thickness, planes.factor, planes.params)
+            sides_a = plane_sides(tri_b, tri_a, planes.positions_t0, planes.positions_t1, planes.swept,
+                                  planes.thickness, planes.factor, planes.params)
         if sides_agree(sides_b) or sides_agree(sides_a):
             continue
         # A vertex certified beyond the other face's plane cannot come within the thickness of that face.
-        mask_ab = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, a, b) & _inside_bits(sides_a)
-        mask_ba = _owned_vertex_mask(faces, owned_vertex_bits, boxes, seams, b, a) & _inside_bits(sides_b)
+        mask_ab = _owned_vertex_mask(tri_a, tri_b, owned_vertex_bits[a] & _inside_bits(sides_a), face_lower[b],
+                                     face_upper[b], vertex_lower, vertex_upper, seams, has_seams)
+        mask_ba = _owned_vertex_mask(tri_b, tri_a, owned_vertex_bits[b] & _inside_bits(sides_b), face_lower[a],
+                                     face_upper[a], vertex_lower, vertex_upper, seams, has_seams)
         vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
         # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests. An edge whose
         # two ends are beyond the other face's plane on one side cannot come within the thickness of
@@ -205,15 +232,15 @@ def _extract_features(
                 ends = edges[eb]
                 ends_b0[k] = ends[0]
                 ends_b1[k] = ends[1]
-                lower_b[k] = boxes.edge_lower[eb]
-                upper_b[k] = boxes.edge_upper[eb]
+                lower_b[k] = edge_lower[eb]
+                upper_b[k] = edge_upper[eb]
         edge_mask = int(0)
         for j in range(3):
             if (bits_a >> j) & 1:
                 ea = ids_a[j]
                 ends_a = edges[ea]
-                lower_a = boxes.edge_lower[ea]
-                upper_a = boxes.edge_upper[ea]
+                lower_a = edge_lower[ea]
+                upper_a = edge_upper[ea]
                 for k in range(3):
                     if (bits_b >> k) & 1:
                         shared = (ends_a[0] == ends_b0[k] or ends_a[0] == ends_b1[k] or ends_a[1] == ends_b0[k]
@@ -300,6 +327,12 @@ class FeaturePairs:
         self.planes = PlaneTestArgs()
         self.planes.factor = tolerances.COPLANARITY_ROUNDING_FACTOR * tolerances.FLOAT32_UNIT_ROUNDOFF
         self.planes.params = ccd_parameters()
+        self.face_planes = FacePlanes(self.faces, device)
+        """Per-face plane slabs of the discrete plane test (:mod:`pscc.collision.face_planes`)."""
+        self.use_face_planes = True
+        """Discrete detection takes the plane test from :attr:`face_planes` (False: from the six vertices,
+        :func:`~pscc.collision.pair_filter.plane_sides`, as continuous detection does)."""
+        self.planes.face_planes = self.face_planes.planes
         self.kept_pairs = 0
         self.kept_self_pairs = 0
         self.self_pairs = 0
@@ -309,7 +342,7 @@ class FeaturePairs:
     def device_bytes(self) -> int:
         """Bytes held on the device (ownership tables; the shared topology is the caller's)."""
         return (self.owned_vertex_bits.capacity + self.owned_edge_bits.capacity
-                + self.pair_stats.capacity + self._host_pair_count.capacity)
+                + self.pair_stats.capacity + self._host_pair_count.capacity + self.face_planes.device_bytes)
 
     def extract_device(
         self,
@@ -350,6 +383,9 @@ class FeaturePairs:
         planes.object_ids = object_ids
         planes.swept = 1 if positions_t1 is not None else 0
         planes.thickness = float(thickness)
+        planes.use_face_planes = int(self.use_face_planes and positions_t1 is None)
+        if planes.use_face_planes:
+            self.face_planes.compute(positions_t0, thickness)
         candidates.reset()
         self.pair_stats.zero_()
         slots = triangle_pairs.shape[0]

@@ -17,11 +17,12 @@ from pscc.mesh import MeshTopology, grid_sheet
 
 
 def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: str = "cpu", positions=None,
-             thickness: float = 0.0):
+             thickness: float = 0.0, face_planes: bool = True):
     """Extract with the supporting-plane test; all-zero positions make every plane degenerate (no pair
     is separated), so every triangle pair is kept."""
     topology = MeshTopology.from_faces(faces, vertex_count)
     extractor = FeaturePairs(faces, DeviceTopology.upload(faces, topology, device), wp.get_device(device))
+    extractor.use_face_planes = face_planes
     candidates = CandidatePairs(1, 1, wp.get_device(device))
     triangle_pairs = wp.array(pairs.reshape(-1, 2).astype(np.int32), dtype=wp.vec2i, device=device)
     x = np.zeros((vertex_count, 3), np.float32) if positions is None else positions
@@ -174,10 +175,11 @@ def _close_feature_pairs(faces: np.ndarray, topology: MeshTopology, x: np.ndarra
 
 
 @settings(max_examples=15, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_plane_sides_drop_no_close_feature_pair(seed: int) -> None:
+@given(seed=st.integers(0, 2**31 - 1), face_planes=st.booleans())
+def test_plane_sides_drop_no_close_feature_pair(seed: int, face_planes: bool) -> None:
     """Two crumpled 4 x 4 sheets close to each other, all triangle pairs: the per-vertex supporting-plane
-    sides leave out only feature pairs farther than the thickness (float64 ipctk distances)."""
+    sides, from the per-face plane slabs or from the six vertices, leave out only feature pairs farther
+    than the thickness (float64 ipctk distances)."""
     rng = np.random.default_rng(seed)
     vertices, sheet, _ = grid_sheet(4, 4)
     n = vertices.shape[0]
@@ -186,7 +188,8 @@ def test_plane_sides_drop_no_close_feature_pair(seed: int) -> None:
     x = np.concatenate([bottom, top]).astype(np.float32)
     faces = np.concatenate([sheet, sheet + n]).astype(np.int32)
     h = 0.06
-    topology, vf, ee = _extract(faces, 2 * n, _all_pairs(len(faces)), positions=x, thickness=h)
+    topology, vf, ee = _extract(faces, 2 * n, _all_pairs(len(faces)), positions=x, thickness=h,
+                                face_planes=face_planes)
     got_vf = {tuple(int(v) for v in r) for r in vf}
     got_ee = {tuple(sorted(int(v) for v in r)) for r in ee}
     close_vf, close_ee = _close_feature_pairs(faces, topology, x, h)
