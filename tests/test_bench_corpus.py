@@ -98,16 +98,21 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     (entry,) = results["frames"]
     assert entry["faces"] == 12736 and not entry["rest"] and entry["missing"] == []
     rows = {r["method"]: r for r in entry["rows"]}
-    assert list(rows) == ["pscc-no-rest", "spatial-hash", "spatial-hash-dop", "newton", "ipctk-lbvh-1",
-                          "ipctk-lbvh-2"]
+    assert list(rows) == ["pscc-no-rest", "spatial-hash", "spatial-hash-dop", "newton", "newton-rebuild",
+                          "ipctk-lbvh-1", "ipctk-lbvh-2"]
     pscc, spatial = rows["pscc-no-rest"], rows["spatial-hash"]
     assert entry["ratios"]["pscc-no-rest"]["subset_of_spatial_hash"]
     assert 0 < pscc["triangle_pairs"] <= spatial["triangle_pairs"]
     assert pscc["vertex_face_pairs"] > 0 and pscc["edge_edge_pairs"] > 0
     assert rows["ipctk-lbvh-1"]["candidate_pairs"] == rows["ipctk-lbvh-2"]["candidate_pairs"] > 0
     assert rows["newton"]["vertex_face_pairs"] > 0 and rows["newton"]["graph_seconds"] > 0
+    # The rebuilding detector finds the same pairs, and has no graph (a rebuild is not recorded).
+    assert rows["newton-rebuild"]["vertex_face_pairs"] == rows["newton"]["vertex_face_pairs"]
+    assert rows["newton-rebuild"]["edge_edge_pairs"] == rows["newton"]["edge_edge_pairs"]
+    assert "graph_seconds" not in rows["newton-rebuild"]
     assert pscc["graph_matches"] and spatial["graph_matches"]
-    for key in ("time_vs_newton", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2", "host_vs_newton"):
+    for key in ("time_vs_newton", "time_vs_newton-rebuild", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2",
+                "host_vs_newton"):
         assert entry["ratios"]["pscc-no-rest"][key] > 0
     # Every pair pscc reports is an ipctk candidate: the two radius conventions agree.
     frame = corpus.CorpusFrame.load(tmp_path / SHIRT.cache_name)

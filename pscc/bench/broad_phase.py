@@ -154,14 +154,16 @@ class NewtonDetection:
     edge-edge queries at pscc's contact radius); :meth:`create` gives None when newton is missing."""
 
     def __init__(self, faces: np.ndarray, positions: np.ndarray, radius: float, device: str,
-                 vertices: np.ndarray | None = None) -> None:
+                 vertices: np.ndarray | None = None, rebuild: bool = False) -> None:
         """Build the detector over ``faces`` (a Newton cloth mesh at ``vertices``, default ``positions``)
-        to query ``positions`` at ``radius``."""
+        to query ``positions`` at ``radius``; with ``rebuild``, every detection rebuilds Newton's BVHs
+        instead of refitting them."""
         import newton
         from newton._src.geometry.tri_mesh_collision import TriMeshCollisionDetector
 
         self.radius = float(radius)
         self.device = device
+        self.rebuild = bool(rebuild)
         builder = newton.ModelBuilder()
         builder.add_cloth_mesh(
             pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
@@ -186,8 +188,11 @@ class NewtonDetection:
         return int(sum(a.capacity for a in arrays))
 
     def run(self) -> None:
-        """One detection: refit, vertex-triangle and edge-edge queries, then a device sync."""
-        self.detector.refit(self.positions)
+        """One detection: refit (or rebuild), vertex-triangle and edge-edge queries, then a device sync."""
+        if self.rebuild:
+            self.detector.rebuild(self.positions)
+        else:
+            self.detector.refit(self.positions)
         self.detector.vertex_triangle_collision_detection(self.radius)
         self.detector.edge_edge_collision_detection(self.radius)
         wp.synchronize_device(self.device)
