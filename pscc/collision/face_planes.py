@@ -6,8 +6,8 @@ it costs two cross products, two square roots and a rounding bound per vertex on
 module moves the per-face part to one pass over the faces per discrete detection, so a pair only
 projects the other face's three vertices.
 
-For face A it stores a direction ``normal`` (A's unit normal as float32 computes it; the test is valid
-for any direction), a point ``center`` (the rounded centroid) and the slab [``lower``, ``upper``] of
+For face A = (a, b, c) it stores a direction ``normal`` ((b - a) x (c - a) as float32 computes it; the
+test is valid for any direction), a point ``center`` (its vertex a) and the slab [``lower``, ``upper``] of
 ``normal . (x - center)`` that holds every point x of A, grown by h |normal| and by the rounding bounds
 of its own computation. A vertex p of B whose computed projection ``s = normal . (p - center)`` is
 above ``upper`` by more than ``e``, the rounding bound of s, is then farther than h from every point
@@ -22,11 +22,17 @@ absolute term covers products in the subnormal range. NaN anywhere makes every c
 vertex is then not certified (a side of 0), which never drops a pair. A face whose normal is zero
 (a degenerate face) gets the zero direction and certifies nothing.
 
+The pass over the faces costs about as much as the plane test saves on 1.5 triangle pairs per face, so
+:class:`FacePlanes` runs it only when the broad phase found at least ``min_pairs_per_face`` pairs per face
+(decided on the device, from the pair counter; the feature pass reads the same counter and takes the
+six-vertex test otherwise).
+
 ========================  ======================  ==============================================
 buffer                    shape, dtype            meaning
 ========================  ======================  ==============================================
-planes                    (face_count,)           :class:`FacePlane` per face, for the thickness
-                          ``FacePlane``           of the last :meth:`FacePlanes.compute`
+planes                    (face_count,)           :class:`FacePlane` per face, for the positions
+                          ``FacePlane``           and thickness of the last :meth:`FacePlanes.compute`
+                                                  (unwritten when it found too few pairs)
 ========================  ======================  ==============================================
 """
 
@@ -68,30 +74,28 @@ def _inf_norm(v: wp.vec3) -> float:
 @wp.func
 def face_plane(a: wp.vec3, b: wp.vec3, c: wp.vec3, thickness: float) -> FacePlane:
     """The plane slab of triangle (a, b, c) grown by ``thickness`` (module docstring)."""
-    n = wp.cross(b - a, c - a)
-    length = wp.length(n)
-    normal = wp.vec3(0.0, 0.0, 0.0)
-    # Zero, subnormal or non-finite normals give the zero direction: the face then certifies nothing.
-    if length > 1.0e-30 and length < 1.0e30:
-        normal = n / length
-    center = (a + b + c) / 3.0
-    da = a - center
-    db = b - center
-    dc = c - center
-    reach = wp.max(wp.max(_inf_norm(da), _inf_norm(db)), _inf_norm(dc)) * ROUND_UP_FACTOR
+    db = b - a
+    dc = c - a
+    normal = wp.cross(db, dc)
+    length = wp.length(normal)
+    # Zero, tiny or non-finite normals give the zero direction: the face then certifies nothing.
+    if not (length > 1.0e-30 and length < 1.0e30):
+        normal = wp.vec3(0.0, 0.0, 0.0)
+        length = 0.0
+    reach = wp.max(_inf_norm(db), _inf_norm(dc)) * ROUND_UP_FACTOR
     error_scale = PROJECTION_ERROR_FACTOR * (wp.abs(normal[0]) + wp.abs(normal[1]) + wp.abs(normal[2]))
     vertex_error = error_scale * reach + TINY_ERROR
-    grow = thickness * wp.length(normal) * ROUND_UP_FACTOR + vertex_error
-    pa = wp.dot(normal, da)
+    grow = thickness * length * ROUND_UP_FACTOR + vertex_error
+    # The centre's own projection is exactly 0; b's and c's are 0 but for rounding.
     pb = wp.dot(normal, db)
     pc = wp.dot(normal, dc)
-    top = wp.max(wp.max(pa, pb), pc)
-    bottom = wp.min(wp.min(pa, pb), pc)
+    top = wp.max(wp.max(0.0, pb), pc)
+    bottom = wp.min(wp.min(0.0, pb), pc)
     # The two sums below round by at most 2 u of their terms' magnitudes; 8 u of them (plus the tiny
     # term) covers that and the rounding of the final addition.
     plane = FacePlane()
     plane.normal = normal
-    plane.center = center
+    plane.center = a
     plane.upper = (top + grow) + ((wp.abs(top) + grow) * PROJECTION_ERROR_FACTOR + TINY_ERROR)
     plane.lower = (bottom - grow) - ((wp.abs(bottom) + grow) * PROJECTION_ERROR_FACTOR + TINY_ERROR)
     plane.reach = reach
@@ -130,37 +134,47 @@ def _compute_face_planes(
     faces: wp.array(dtype=wp.vec3i),
     positions: wp.array(dtype=wp.vec3),
     thickness: float,
+    pair_counts: wp.array(dtype=wp.int64),
+    min_pairs: wp.int64,
     # out:
     planes: wp.array(dtype=FacePlane),
 ):
-    """One thread per face: its plane slab at ``positions`` grown by ``thickness``."""
+    """One thread per face: its plane slab at ``positions`` grown by ``thickness``, when the broad phase
+    found at least ``min_pairs`` triangle pairs (``pair_counts[0]``); else nothing."""
+    if pair_counts[0] < min_pairs:
+        return
     i = wp.tid()
     f = faces[i]
     planes[i] = face_plane(positions[f[0]], positions[f[1]], positions[f[2]], thickness)
 
 
 class FacePlanes:
-    """The plane slab of every face (layout in the module docstring).
+    """The plane slab of every face, computed when a call has enough triangle pairs (module docstring).
 
     Args:
         faces: (face_count,) ``wp.vec3i`` device array.
         device: Warp device.
+        min_pairs_per_face: triangle pairs per face from which :meth:`compute` writes the slabs.
     """
 
-    def __init__(self, faces: wp.array, device: wp.Device) -> None:
+    def __init__(self, faces: wp.array, device: wp.Device, min_pairs_per_face: float = 2.0) -> None:
         self.device = device
         self.faces = faces
         self.planes = wp.empty(faces.shape[0], dtype=FacePlane, device=device)
+        self.min_pairs = int(round(float(min_pairs_per_face) * faces.shape[0]))
+        """Triangle pairs from which the slabs are written (and used)."""
 
     @property
     def device_bytes(self) -> int:
         """Bytes held on the device."""
         return self.planes.capacity
 
-    def compute(self, positions: wp.array, thickness: float) -> None:
-        """Every face's plane slab at ``positions``, grown by ``thickness`` (length units).
+    def compute(self, positions: wp.array, thickness: float, pair_counts: wp.array) -> None:
+        """Every face's plane slab at ``positions``, grown by ``thickness`` (length units), if
+        ``pair_counts[0]`` (int64, on the device) is at least :attr:`min_pairs`.
 
         Allocates: no. Capture-safe: yes.
         """
-        wp.launch(_compute_face_planes, dim=self.faces.shape[0], inputs=[self.faces, positions, float(thickness)],
+        wp.launch(_compute_face_planes, dim=self.faces.shape[0],
+                  inputs=[self.faces, positions, float(thickness), pair_counts, wp.int64(self.min_pairs)],
                   outputs=[self.planes], device=self.device)

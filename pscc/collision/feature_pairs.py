@@ -15,8 +15,9 @@ owned_edge_bits           (face_count,) int32  bit k set: the face owns its edge
 ========================  ===================  ==============================================
 
 Each triangle pair (a row of a row kernel, :mod:`pscc._lanes`) first meets the supporting-plane test
-of :mod:`pscc.collision.pair_filter`, per vertex (discrete detection: against the per-face plane slabs
-of :mod:`pscc.collision.face_planes`, computed once per call; continuous:
+of :mod:`pscc.collision.pair_filter`, per vertex (discrete detection with at least two triangle pairs per
+face: against the per-face plane slabs of :mod:`pscc.collision.face_planes`, computed once per call;
+otherwise:
 :func:`~pscc.collision.pair_filter.plane_sides`): the
 pair is dropped when one face's plane separates the other face; otherwise a vertex certified beyond the
 other face's plane, and an edge whose two ends are beyond it on one side, are left out of its feature
@@ -130,6 +131,7 @@ class PlaneTestArgs:
     params: CcdParameters
     face_planes: wp.array(dtype=FacePlane)
     use_face_planes: wp.int32
+    min_plane_pairs: wp.int64
 
 
 @wp.struct
@@ -176,6 +178,9 @@ def _extract_features(
     face_planes = planes.face_planes
     positions = planes.positions_t0
     use_face_planes = planes.use_face_planes
+    # The slabs were written only when the pair counter reached min_plane_pairs (FacePlanes.compute).
+    if pair_counts[0] < planes.min_plane_pairs:
+        use_face_planes = 0
     object_ids = planes.object_ids
     vertex_lower = boxes.vertex_lower
     vertex_upper = boxes.vertex_upper
@@ -330,9 +335,11 @@ class FeaturePairs:
         self.face_planes = FacePlanes(self.faces, device)
         """Per-face plane slabs of the discrete plane test (:mod:`pscc.collision.face_planes`)."""
         self.use_face_planes = True
-        """Discrete detection takes the plane test from :attr:`face_planes` (False: from the six vertices,
-        :func:`~pscc.collision.pair_filter.plane_sides`, as continuous detection does)."""
+        """Discrete detection takes the plane test from :attr:`face_planes` when the call has enough
+        triangle pairs (False: always from the six vertices, :func:`~pscc.collision.pair_filter.plane_sides`,
+        as continuous detection does)."""
         self.planes.face_planes = self.face_planes.planes
+        self.planes.min_plane_pairs = self.face_planes.min_pairs
         self.kept_pairs = 0
         self.kept_self_pairs = 0
         self.self_pairs = 0
@@ -384,8 +391,9 @@ class FeaturePairs:
         planes.swept = 1 if positions_t1 is not None else 0
         planes.thickness = float(thickness)
         planes.use_face_planes = int(self.use_face_planes and positions_t1 is None)
+        planes.min_plane_pairs = self.face_planes.min_pairs
         if planes.use_face_planes:
-            self.face_planes.compute(positions_t0, thickness)
+            self.face_planes.compute(positions_t0, thickness, pair_counts)
         candidates.reset()
         self.pair_stats.zero_()
         slots = triangle_pairs.shape[0]

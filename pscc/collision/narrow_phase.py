@@ -33,9 +33,10 @@ import warp as wp
 from pscc._lanes import row_lanes
 from pscc.collision.candidates import CandidatePairs, valid_rows
 from pscc.collision.contacts import ContactArgs, DeviceContacts
+from pscc.collision.pair_filter import segments_separated
 from pscc.collision.scratch import view
 from pscc.geometry import distance_tolerances
-from pscc.geometry.ccd import CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
+from pscc.geometry.ccd import NO_HIT, CcdParameters, ccd_parameters, edge_edge_ccd_toi, vertex_face_ccd_toi
 from pscc.geometry.distance import (
     edge_edge_closest_point,
     edge_edge_distance_squared,
@@ -198,6 +199,7 @@ class ProximityParameters:
     distance_error: wp.float32  # C x EPS32: |d_float32 - d_exact| <= distance_error x L (well-shaped)
     well_shaped_flatness: wp.float32  # smallest |ab x ac|^2 / max_edge^4 the bound covers
     thin_overestimate: wp.float32  # bound / L on how much the closed form overestimates on a thin face
+    edge_separation: wp.int32  # 1: edge pairs certified apart by their common normal skip the closed form
 
 
 def proximity_parameters() -> ProximityParameters:
@@ -206,6 +208,7 @@ def proximity_parameters() -> ProximityParameters:
     params.distance_error = 2.0 * distance_tolerances.DISTANCE_ERROR_CONST * 2.0**-23
     params.well_shaped_flatness = distance_tolerances.WELL_SHAPED_MIN_FLATNESS
     params.thin_overestimate = 2.0 * distance_tolerances.ILL_CONDITIONED_REL_ERROR
+    params.edge_separation = 1
     return params
 
 
@@ -273,6 +276,19 @@ def edge_edge_proximity_toi(
     return _within(edge_edge_distance_squared_at(a0, a1, b0, b1, st), thickness, error)
 
 
+@wp.func
+def edges_certified_apart(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, thickness: float,
+                          proximity: ProximityParameters) -> bool:
+    """Whether the discrete test may skip the closed form: the segments are certified farther apart than
+    ``thickness`` by the plane normal to both (:func:`pscc.collision.pair_filter.segments_separated`, with
+    its own rounding bound). Such a pair gets ``NO_HIT``. Its distance may still be within the closed
+    form's tolerance band past the thickness, where :func:`edge_edge_proximity_toi` would report it: a
+    separated pair is farther than the thickness, so it is not a contact by either test's definition."""
+    if proximity.edge_separation == 0:
+        return False
+    return segments_separated(a0, a1, b0, b1, thickness)
+
+
 @wp.struct
 class ProximityTest:
     """The discrete proximity test of a narrow phase, for a kernel that runs it itself
@@ -338,7 +354,10 @@ def _edge_edge_proximity(
         a1 = positions[ea[1]]
         b0 = positions[eb[0]]
         b1 = positions[eb[1]]
-        toi = edge_edge_proximity_toi(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1), thickness, proximity)
+        toi = float(NO_HIT)
+        if not edges_certified_apart(a0, a1, b0, b1, thickness, proximity):
+            toi = edge_edge_proximity_toi(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1), thickness,
+                                          proximity)
         toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 1, 1)

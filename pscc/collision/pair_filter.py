@@ -98,3 +98,46 @@ def plane_sides(
 def sides_agree(sides: wp.vec3) -> bool:
     """All three sides are the same non-zero side: the plane separates the face."""
     return sides[0] != 0.0 and sides[0] == sides[1] and sides[1] == sides[2]
+
+
+_UNIT_ROUNDOFF = 2.0**-24
+# 16 u: a projection's rounding bound is 4.01 u |n|_1 |d|_inf; the difference of two projections and its own
+# rounding stay under 10.1 u of it; the rest absorbs the roundings of the bound itself.
+_SEGMENT_ERROR_FACTOR = wp.constant(16.0 * _UNIT_ROUNDOFF)
+_SEGMENT_GROW_FACTOR = wp.constant(1.0 + 8.0 * _UNIT_ROUNDOFF)
+_SEGMENT_TINY_ERROR = wp.constant(1.0e-35)
+
+
+@wp.func
+def _inf_norm(v: wp.vec3) -> float:
+    return wp.max(wp.max(wp.abs(v[0]), wp.abs(v[1])), wp.abs(v[2]))
+
+
+@wp.func
+def segments_separated(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, thickness: float) -> bool:
+    """Whether segments [a0, a1] and [b0, b1] are certified farther apart than ``thickness`` by the plane
+    normal to both (the direction n = (a1 - a0) x (b1 - b0), as float32 computes it; any direction would
+    do): the projections of the two segments onto n, each within its rounding bound, are more than
+    ``thickness |n|`` apart.
+
+    Rounding (float32, unit roundoff u, with or without fused multiply-adds): each projection
+    fl(n . fl(p - b0)) is within 4.01 u |n|_1 |p - b0|_inf of the exact n . (p - b0), and the projection of
+    b0 is exactly 0; the gap between the two intervals, computed with one more subtraction, is within
+    10.1 u |n|_1 max |p - b0|_inf of the exact gap, and the margin subtracted from it is
+    16 u |n|_1 max |p - b0|_inf + thickness |n|_2 (1 + 8 u), enough for the roundings of the margin itself. The
+    final comparison, fl(gap - margin) > 0, is exact in sign. Parallel or degenerate segments (n = 0) and
+    NaN are never separated. The discrete feature pass leaves such edge pairs out
+    (:mod:`pscc.collision.feature_pairs`)."""
+    n = wp.cross(a1 - a0, b1 - b0)
+    d0 = a0 - b0
+    d1 = a1 - b0
+    d3 = b1 - b0
+    s0 = wp.dot(n, d0)
+    s1 = wp.dot(n, d1)
+    s3 = wp.dot(n, d3)
+    reach = wp.max(wp.max(_inf_norm(d0), _inf_norm(d1)), _inf_norm(d3))
+    error = _SEGMENT_ERROR_FACTOR * (wp.abs(n[0]) + wp.abs(n[1]) + wp.abs(n[2])) * reach + _SEGMENT_TINY_ERROR
+    margin = error + thickness * wp.length(n) * _SEGMENT_GROW_FACTOR
+    above = wp.min(s0, s1) - wp.max(0.0, s3)
+    below = wp.min(0.0, s3) - wp.max(s0, s1)
+    return wp.max(above - margin, below - margin) > 0.0

@@ -48,7 +48,12 @@ from pscc.collision.contacts import (
     vertex_face_vertices,
 )
 from pscc.collision.device_topology import DeviceTopology
-from pscc.collision.narrow_phase import ProximityTest, edge_edge_proximity_toi, vertex_face_proximity_toi
+from pscc.collision.narrow_phase import (
+    ProximityTest,
+    edge_edge_proximity_toi,
+    edges_certified_apart,
+    vertex_face_proximity_toi,
+)
 from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
 from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
 from pscc.mesh.topology import MeshTopology
@@ -277,10 +282,12 @@ def _test_and_append(
         toi = float(0.0)
         w = wp.vec4(0.0)
         if edge_edge != 0:
-            st = edge_edge_closest_point(x0, x1, x2, x3)
-            toi = edge_edge_proximity_toi(x0, x1, x2, x3, st, test.thickness, test.proximity)
+            toi = float(2.0)  # NO_HIT: certified apart (the narrow phase's own test, bit for bit)
+            if not edges_certified_apart(x0, x1, x2, x3, test.thickness, test.proximity):
+                st = edge_edge_closest_point(x0, x1, x2, x3)
+                toi = edge_edge_proximity_toi(x0, x1, x2, x3, st, test.thickness, test.proximity)
+                w = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
             contacts.edge_edge_toi[row] = toi
-            w = wp.vec4(1.0 - st[0], st[0], -(1.0 - st[1]), -st[1])
         else:
             closest = vertex_face_closest_point(x0, x1, x2, x3)
             toi = vertex_face_proximity_toi(x0, x1, x2, x3, closest, test.thickness, test.params, test.proximity)

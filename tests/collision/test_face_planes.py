@@ -1,5 +1,6 @@
-"""Per-face plane slabs (pscc.collision.face_planes): a vertex they certify beyond a face is farther
-than the thickness from it (float64 distances), on random, far-off, tiny and degenerate faces."""
+"""Per-face plane slabs (pscc.collision.face_planes): a vertex they certify beyond a face is farther than
+the thickness from it (float64 distances), on random, far-off, tiny and degenerate faces; the pass runs
+only for calls with enough triangle pairs."""
 
 from __future__ import annotations
 
@@ -29,8 +30,8 @@ def _slab_sides(x: np.ndarray, faces: np.ndarray, pairs: np.ndarray, thickness: 
     """Sides of face b's vertices against face a's slab, per (a, b) row of ``pairs``."""
     faces_d = wp.array(faces.astype(np.int32), dtype=wp.vec3i, device="cpu")
     x_d = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
-    planes = FacePlanes(faces_d, wp.get_device("cpu"))
-    planes.compute(x_d, thickness)
+    planes = FacePlanes(faces_d, wp.get_device("cpu"), min_pairs_per_face=0.0)
+    planes.compute(x_d, thickness, wp.zeros(1, dtype=wp.int64, device="cpu"))
     out = wp.zeros(len(pairs), dtype=wp.vec3, device="cpu")
     wp.launch(_sides, dim=len(pairs), inputs=[planes.planes, faces_d, x_d,
                                               wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device="cpu")],
@@ -139,3 +140,17 @@ def test_vertices_at_the_thickness_within_rounding(offset: float) -> None:
             certified += 1
             assert _point_face_distance(x64[faces[b][k]], x64[faces[a]]) > h, (a, b, k)
     assert certified > 0.1 * 3 * n
+
+
+def test_slabs_are_written_only_for_calls_with_enough_pairs() -> None:
+    """With fewer triangle pairs than min_pairs_per_face times the faces, the pass writes nothing (the feature
+    pass then takes the six-vertex test); from that count on it writes every face."""
+    faces_d = wp.array(np.array([[0, 1, 2], [0, 2, 3]], np.int32), dtype=wp.vec3i, device="cpu")
+    x_d = wp.array(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32), dtype=wp.vec3, device="cpu")
+    planes = FacePlanes(faces_d, wp.get_device("cpu"), min_pairs_per_face=2.0)
+    assert planes.min_pairs == 4
+    planes.planes.zero_()
+    planes.compute(x_d, 0.1, wp.array([3], dtype=wp.int64, device="cpu"))
+    assert np.all(planes.planes.numpy()["upper"] == 0.0)
+    planes.compute(x_d, 0.1, wp.array([4], dtype=wp.int64, device="cpu"))
+    assert np.all(planes.planes.numpy()["upper"] > 0.1)

@@ -23,6 +23,8 @@ def _extract(faces: np.ndarray, vertex_count: int, pairs: np.ndarray, device: st
     topology = MeshTopology.from_faces(faces, vertex_count)
     extractor = FeaturePairs(faces, DeviceTopology.upload(faces, topology, device), wp.get_device(device))
     extractor.use_face_planes = face_planes
+    if face_planes:  # every call takes the plane slabs, however few its pairs
+        extractor.face_planes.min_pairs = 0
     candidates = CandidatePairs(1, 1, wp.get_device(device))
     triangle_pairs = wp.array(pairs.reshape(-1, 2).astype(np.int32), dtype=wp.vec2i, device=device)
     x = np.zeros((vertex_count, 3), np.float32) if positions is None else positions
