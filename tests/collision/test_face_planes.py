@@ -51,7 +51,8 @@ def _random_pairs(rng: np.random.Generator, n: int, scale: float, offset: float)
     a = rng.uniform(-1, 1, (n, 3, 3))
     normal = rng.normal(size=(n, 3))
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    b = a[:, rng.permutation(3)] * rng.uniform(0.5, 1.5, (n, 1, 1)) + normal[:, None, :] * rng.uniform(-0.5, 0.5, (n, 1, 1))
+    shift = normal[:, None, :] * rng.uniform(-0.5, 0.5, (n, 1, 1))
+    b = a[:, rng.permutation(3)] * rng.uniform(0.5, 1.5, (n, 1, 1)) + shift
     b += rng.normal(size=(n, 3, 3)) * 10.0 ** rng.uniform(-7, -1, (n, 1, 1))
     x = (np.concatenate([a, b], axis=1) * scale + offset).reshape(-1, 3).astype(np.float32)
     faces = np.arange(6 * n).reshape(-1, 3)
@@ -70,7 +71,7 @@ def test_certified_vertices_are_farther_than_the_thickness(scale: float, offset:
         sides = _slab_sides(x, faces, pairs, thickness)
         certified = 0
         clear_missed = 0
-        for (a, b), side in zip(pairs, sides):
+        for (a, b), side in zip(pairs, sides, strict=True):
             tri = x64[faces[a]]
             normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
             normal /= np.linalg.norm(normal)
@@ -135,7 +136,7 @@ def test_vertices_at_the_thickness_within_rounding(offset: float) -> None:
     sides = _slab_sides(x, faces, pairs, h)
     x64 = x.astype(np.float64)
     certified = 0
-    for (a, b), side in zip(pairs, sides):
+    for (a, b), side in zip(pairs, sides, strict=True):
         for k in np.flatnonzero(side):
             certified += 1
             assert _point_face_distance(x64[faces[b][k]], x64[faces[a]]) > h, (a, b, k)
