@@ -190,6 +190,55 @@ def _next(u: int) -> int:
 
 
 @wp.func
+def _sign_beyond(value: float, bound: float) -> float:
+    """The sign of ``value`` when |value| > ``bound``, else 0."""
+    if wp.abs(value) <= bound:
+        return 0.0
+    return wp.sign(value)
+
+
+@wp.func
+def _certified_at_rest(x: wp.array(dtype=wp.vec3), margin: float, ta: wp.vec3i, tb: wp.vec3i, ua: int, ub: int,
+                       edge: bool) -> bool:
+    """:func:`certified_in` at rest (DCD), for faces that share vertex ``ta[ua]`` = ``tb[ub]`` (and an edge
+    when ``edge``): the same tests as :func:`_common_direction` and :func:`_sector_sign` with every length
+    taken once. Both faces' normals are made from their edges at the shared vertex v, so each margin is
+    the product of the lengths of the edges from v it is made of (the rounding argument of :func:`_sees`
+    holds for any two edges of a face)."""
+    v = x[ta[ua]]
+    a1 = x[ta[_next(ua)]] - v
+    a2 = x[ta[_next(_next(ua))]] - v
+    b1 = x[tb[_next(ub)]] - v
+    b2 = x[tb[_next(_next(ub))]] - v
+    la1 = wp.length(a1)
+    la2 = wp.length(a2)
+    lb1 = wp.length(b1)
+    lb2 = wp.length(b2)
+    na = wp.cross(a1, a2)
+    nb = wp.cross(b1, b2)
+    lna = wp.length(na)
+    lnb = wp.length(nb)
+    if not (lna > 0.0 and lnb > 0.0):
+        return False
+    d = na / lna + nb / lnb
+    ld = wp.length(d)
+    # _sees(d, n, scale, margin, False) for both faces.
+    if not wp.dot(d, na) > wp.max(margin * ld * (la1 * la2), _CONE_COS * ld * lna):
+        return False
+    if not wp.dot(d, nb) > wp.max(margin * ld * (lb1 * lb2), _CONE_COS * ld * lnb):
+        return False
+    if edge:
+        return True
+    bound = margin * ld
+    w11 = _sign_beyond(wp.dot(d, wp.cross(a1, b1)), bound * la1 * lb1)
+    w12 = _sign_beyond(wp.dot(d, wp.cross(b1, a2)), bound * lb1 * la2)
+    w21 = _sign_beyond(wp.dot(d, wp.cross(a1, b2)), bound * la1 * lb2)
+    w22 = _sign_beyond(wp.dot(d, wp.cross(b2, a2)), bound * lb2 * la2)
+    return ((w11 < 0.0 or w12 < 0.0) and (w21 < 0.0 or w22 < 0.0) and (w11 > 0.0 or w21 < 0.0)
+            and (w12 < 0.0 or w22 > 0.0))
+
+
+@wp.func
 def certified_in(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), swept: int, margin: float,
                  ta: wp.vec3i, tb: wp.vec3i) -> bool:
     """:func:`shared_pair_certified` with the arguments unpacked (positions at t0 and, when ``swept``
@@ -209,6 +258,8 @@ def certified_in(x0: wp.array(dtype=wp.vec3), x1: wp.array(dtype=wp.vec3), swept
                     edge = True
     if shared == 0 or shared > 2 or (shared == 2 and not edge):
         return False
+    if swept == 0:
+        return _certified_at_rest(x0, margin, ta, tb, ua, ub, shared == 2)
     d = _common_direction(x0, x1, swept, margin, ta, tb)
     if wp.length_sq(d) == 0.0:
         return False
