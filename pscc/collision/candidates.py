@@ -115,12 +115,13 @@ class CandidatePairs:
         Allocates: only when a buffer grows. Capture-safe: no.
         """
         counts = self.counts.numpy().astype(np.int64)
-        if np.any(counts < 0):
+        vertex_face, edge_edge = int(counts[0]), int(counts[1])
+        if vertex_face < 0 or edge_edge < 0:
             raise CapacityError("candidate counter overflowed int32; reduce the thickness or split the scene")
         self._host_counts = counts
-        fits = bool(counts[0] <= self.capacity_vf and counts[1] <= self.capacity_ee)
+        fits = vertex_face <= self.capacity_vf and edge_edge <= self.capacity_ee
         if not fits:
-            self.ensure(int(counts[0]), int(counts[1]))
+            self.ensure(vertex_face, edge_edge)
         return fits
 
     def ensure(self, capacity_vf: int, capacity_ee: int) -> None:

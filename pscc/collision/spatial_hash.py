@@ -351,7 +351,8 @@ class SpatialHash:
         self._pair_reruns = 0
         self._last_call: tuple[bool, int] | None = None
         self._last_slab = False
-        self.stats = SpatialHashStats()
+        self._stats = SpatialHashStats()
+        self._stats_source: tuple[np.ndarray, int] | None = None  # (summary, reruns) of the last check
 
     # ------------------------------------------------------------------ buffers
 
@@ -742,9 +743,23 @@ class SpatialHash:
         return {0: self.entry_capacity, 1: self.group_capacity, 2: self.row_capacity, 3: self.pair_capacity,
                 4: self.slab_capacity}
 
+    @property
+    def stats(self) -> SpatialHashStats:
+        """The stats of the last :meth:`check_capacity` (made from its counters on first access)."""
+        if self._stats_source is not None:
+            summary, reruns = self._stats_source
+            self._stats = SpatialHashStats.from_summary(summary, self.face_count, reruns, self.device_bytes)
+            self._stats_source = None
+        return self._stats
+
+    @stats.setter
+    def stats(self, value: SpatialHashStats) -> None:
+        self._stats = value
+        self._stats_source = None
+
     def check_capacity(self) -> bool:
         """Sync point: read the counters of the last device call (one copy), raise its deferred input
-        errors, grow every buffer that overflowed (1.25 x the exact need) and fill :attr:`stats`.
+        errors, grow every buffer that overflowed (1.25 x the exact need) and keep them for :attr:`stats`.
 
         Returns:
             True when everything fit (the results are valid); False when a buffer grew or the sort's
@@ -761,7 +776,7 @@ class SpatialHash:
         if self._last_call is None:
             raise InputError("argument", "check_capacity", "no device call has run", "call find_pairs_device first")
         summary = self.summary.numpy()
-        info = summary.astype(np.int64)
+        info = summary.astype(np.int64).tolist()  # Python ints: cheaper to compare than numpy scalars
         ordered, node_limit = self._last_call
         self._raise_input_errors(info, ordered, node_limit)
         fits = True
@@ -788,13 +803,15 @@ class SpatialHash:
         if wanted > 0:
             self.cell_bits = min(31, max(self.cell_bits + 1, (wanted - 1).bit_length()))
             fits = False
-        self.stats = SpatialHashStats.from_summary(summary, self.face_count, self._pair_reruns, self.device_bytes)
+        # The stats are made when asked for (:attr:`stats`): a caller that checks every replay pays only
+        # for the counters.
+        self._stats_source = (summary, self._pair_reruns)
         self._pair_count = min(found, self.pair_capacity) if fits else 0
         if fits:
             self._pair_reruns = 0
         return fits
 
-    def _raise_input_errors(self, info: np.ndarray, ordered: bool, node_limit: int) -> None:
+    def _raise_input_errors(self, info: list[int], ordered: bool, node_limit: int) -> None:
         """The input errors the device path counted, in the order the checks run."""
         if info[kernels.INFO_BAD_ORDER] > 0:
             raise InputError("argument", "face_order", "is not a permutation of the faces",
