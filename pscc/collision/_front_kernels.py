@@ -311,21 +311,24 @@ def _test_frontier(
     args: NodeTestArgs,
     frontier: wp.array(dtype=wp.int32),
     frontier_count: wp.array(dtype=wp.int32),
+    lanes: int,
     # out:
     keep: wp.array(dtype=wp.int32),
     split: wp.array(dtype=wp.int32),
 ):
-    """One thread per frontier slot (capacity N + 1): keep the node (passes) or split it into its
-    two children; slots past the frontier get 0, so the scans' last entries are the totals."""
-    i = wp.tid()
-    keep[i] = 0
-    split[i] = 0
-    if i >= frontier_count[0]:
-        return
-    if _node_passes(args, frontier[i]):
-        keep[i] = 1
-    else:
-        split[i] = 2
+    """Row kernel (:mod:`pscc._lanes`) over the frontier slots (capacity N + 1): keep the node (passes) or
+    split it into its two children; slots past the frontier get 0, so the scans' last entries are the
+    totals. (On the CPU one thread walks the slots: a thread per slot copied the node-test arguments, a
+    struct of 27 arrays, for each of the N + 1 slots.)"""
+    count = frontier_count[0]
+    for i in range(wp.tid(), keep.shape[0], lanes):
+        keep[i] = 0
+        split[i] = 0
+        if i < count:
+            if _node_passes(args, frontier[i]):
+                keep[i] = 1
+            else:
+                split[i] = 2
 
 
 @wp.kernel

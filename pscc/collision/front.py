@@ -56,6 +56,7 @@ import numpy as np
 import warp as wp
 
 from pscc import tolerances
+from pscc._lanes import row_lanes
 from pscc._reductions import PrefixSum
 from pscc.collision._front_kernels import (
     NodeTestArgs,
@@ -386,7 +387,8 @@ class NormalConeFront:
                                     [self.front]),
             "start_sprout": record(_start_sprout, n, [self.front, self.front_count],
                                    [self._frontier, self._frontier_count, self._counters]),
-            "test_frontier": record(_test_frontier, n + 1, [args, self._frontier, self._frontier_count],
+            "test_frontier": record(_test_frontier, row_lanes(device, n + 1),
+                                    [args, self._frontier, self._frontier_count, row_lanes(device, n + 1)],
                                     [self._keep, self._split]),
             "scatter_frontier": record(_scatter_frontier, n,
                                        [bvh, self._frontier, self._frontier_count, self._keep,
