@@ -77,30 +77,20 @@ def _project_group(
     return wp.vec2(lo, hi)
 
 
-@wp.kernel
-def _compute_group_slabs(
-    # in:
+@wp.func
+def _group_slab(
+    g: int,
+    live: int,
     entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
     group_cell: wp.array(dtype=wp.int32),
     cell_end: wp.array(dtype=wp.int32),
     slab: SlabArgs,
-    info: wp.array(dtype=wp.int64),
-    # out:
     group_axis: wp.array(dtype=wp.vec3),
     group_slab: wp.array(dtype=wp.vec2),
 ):
-    """One thread per live group: axis = unit normal of its middle face at mid-step (any axis is valid;
-    this one makes the slab of a flat patch thin), slab = its faces' interval on the axis, and the
-    bounding sphere of its vertices (``slab.group_sphere``). A zero axis (a degenerate middle face)
-    marks a group that is never culled. Groups whose cell holds too few other entries for any slab test
-    (``slab.min_work``) are skipped. The first
-    group of each cell also writes the cell's ``slab.group_skip``."""
-    g = wp.tid()
-    live = int(info[_LIVE_GROUPS])
-    if g >= live or not slab_test_on(slab):
-        return
+    """The body of ``_compute_group_slabs`` for live group g of ``live``."""
     start = group_start[g]
     end = group_end[g]
     cell = group_cell[g]
@@ -172,6 +162,35 @@ def _compute_group_slabs(
     centre = 0.5 * (lower + upper)
     radius = 0.5 * wp.length(upper - lower)
     slab.group_sphere[g] = wp.vec4(centre[0], centre[1], centre[2], radius)
+
+
+
+@wp.kernel
+def _compute_group_slabs(
+    # in:
+    entry_face: wp.array(dtype=wp.int32),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    slab: SlabArgs,
+    info: wp.array(dtype=wp.int64),
+    lanes: int,
+    # out:
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
+):
+    """Row kernel (:mod:`pscc._lanes`) over the live groups: axis = unit normal of its middle face at
+    mid-step (any axis is valid; this one makes the slab of a flat patch thin), slab = its faces' interval on the axis, and the
+    bounding sphere of its vertices (``slab.group_sphere``). A zero axis (a degenerate middle face)
+    marks a group that is never culled. Groups whose cell holds too few other entries for any slab test
+    (``slab.min_work``) are skipped. The first
+    group of each cell also writes the cell's ``slab.group_skip``."""
+    live = int(info[_LIVE_GROUPS])
+    if not slab_test_on(slab):
+        return
+    for g in range(wp.tid(), wp.min(live, group_slab.shape[0]), lanes):
+        _group_slab(g, live, entry_face, group_start, group_end, group_cell, cell_end, slab, group_axis, group_slab)
 
 
 @wp.func
@@ -260,9 +279,10 @@ def _bit_range(lo: int, hi: int) -> wp.uint64:
     return upper & ~((wp.uint64(1) << wp.uint64(lo)) - wp.uint64(1))
 
 
-@wp.kernel
-def _plan_rows(
-    # in:
+@wp.func
+def _plan_group_rows(
+    g: int,
+    live: int,
     entry_key: wp.array(dtype=wp.int64),
     entry_face: wp.array(dtype=wp.int32),
     group_start: wp.array(dtype=wp.int32),
@@ -274,26 +294,11 @@ def _plan_rows(
     slab: SlabArgs,
     grid: wp.array(dtype=GridState),
     check_keys: int,
-    # out:
     group_mask: wp.array(dtype=wp.uint64),
     row_count: wp.array(dtype=wp.int32),
     info: wp.array(dtype=wp.int64),
 ):
-    """One thread per group slot g (0 rows past the live groups): walks the later groups of its cell
-    (the rest of the workLoadHashTable row), slab-tests the first MASK_BITS of them whose face tests
-    would number at least ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts
-    its rows (maximal runs of later groups that pass), its face tests and its slab tests (``info``).
-    With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
-    same key never passes and its face pairs are counted as same-node pairs (they must be 0: faces of
-    one node are never paired). Once no check is left for the rest of the cell (no key check, and no
-    slab test, past MASK_BITS or no later group large enough for one: ``slab.group_skip``), the rest
-    is one run, added in O(1), its mask bits set; for a group of one or two entries, a stretch of later
-    groups too small for a slab test with it is passed in O(1) too."""
-    g = wp.tid()
-    live = int(info[_LIVE_GROUPS])
-    if g >= live:
-        row_count[g] = 0
-        return
+    """The body of ``_plan_rows`` for live group g of ``live``."""
     margin = grid[0].margin
     bound_pad = grid[0].bound_pad
     slab_on = slab_test_on(slab)
@@ -380,6 +385,46 @@ def _plan_rows(
         wp.atomic_add(info, _SAME_NODE, same_node)
 
 
+
+@wp.kernel
+def _plan_rows(
+    # in:
+    entry_key: wp.array(dtype=wp.int64),
+    entry_face: wp.array(dtype=wp.int32),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    group_axis: wp.array(dtype=wp.vec3),
+    group_slab: wp.array(dtype=wp.vec2),
+    slab: SlabArgs,
+    grid: wp.array(dtype=GridState),
+    check_keys: int,
+    lanes: int,
+    # out:
+    group_mask: wp.array(dtype=wp.uint64),
+    row_count: wp.array(dtype=wp.int32),
+    info: wp.array(dtype=wp.int64),
+):
+    """Row kernel (:mod:`pscc._lanes`) over the group slots g (``row_count``'s length; 0 rows past the live
+    groups): walks the later groups of its cell
+    (the rest of the workLoadHashTable row), slab-tests the first MASK_BITS of them whose face tests
+    would number at least ``slab.min_work`` (the result goes to bit t of ``group_mask``), and counts
+    its rows (maximal runs of later groups that pass), its face tests and its slab tests (``info``).
+    With ``check_keys`` (a caller-given fill order, which could split a node), a later group with the
+    same key never passes and its face pairs are counted as same-node pairs (they must be 0: faces of
+    one node are never paired). Once no check is left for the rest of the cell (no key check, and no
+    slab test, past MASK_BITS or no later group large enough for one: ``slab.group_skip``), the rest
+    is one run, added in O(1), its mask bits set; for a group of one or two entries, a stretch of later
+    groups too small for a slab test with it is passed in O(1) too."""
+    live = int(info[_LIVE_GROUPS])
+    for g in range(wp.tid(), row_count.shape[0], lanes):
+        if g >= live:
+            row_count[g] = 0
+        else:
+            _plan_group_rows(g, live, entry_key, entry_face, group_start, group_end, group_cell, cell_end, group_axis,
+                             group_slab, slab, grid, check_keys, group_mask, row_count, info)
+
 @wp.kernel
 def _gather_row_info(
     # in:
@@ -410,9 +455,9 @@ def _gather_row_info(
         info[_CELL_CODES] = wp.int64(1)
 
 
-@wp.kernel
-def _write_rows(
-    # in:
+@wp.func
+def _write_group_rows(
+    g: int,
     entry_key: wp.array(dtype=wp.int64),
     group_start: wp.array(dtype=wp.int32),
     group_end: wp.array(dtype=wp.int32),
@@ -423,17 +468,10 @@ def _write_rows(
     check_keys: int,
     row_count: wp.array(dtype=wp.int32),
     row_end: wp.array(dtype=wp.int32),
-    info: wp.array(dtype=wp.int64),
-    # out:
     row_span: wp.array(dtype=wp.vec3i),
     row_work: wp.array(dtype=wp.int64),
 ):
-    """One thread per live group g (none when the rows do not fit): the same walk as ``_plan_rows``,
-    writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
-    n_g x (b_end - b_start)."""
-    g = wp.tid()
-    if wp.int64(g) >= info[_LIVE_GROUPS] or info[_LIVE_ROWS] == wp.int64(0):
-        return
+    """The body of ``_write_rows`` for live group g."""
     slot = row_end[g] - row_count[g]
     n_g = wp.int64(group_end[g] - group_start[g])
     stop = cell_end[group_cell[g]]
@@ -475,6 +513,36 @@ def _write_rows(
         row_span[slot] = wp.vec3i(g, run_start, stop)
         row_work[slot] = n_g * wp.int64(stop - run_start)
 
+
+
+@wp.kernel
+def _write_rows(
+    # in:
+    entry_key: wp.array(dtype=wp.int64),
+    group_start: wp.array(dtype=wp.int32),
+    group_end: wp.array(dtype=wp.int32),
+    group_cell: wp.array(dtype=wp.int32),
+    cell_end: wp.array(dtype=wp.int32),
+    group_mask: wp.array(dtype=wp.uint64),
+    slab: SlabArgs,
+    check_keys: int,
+    row_count: wp.array(dtype=wp.int32),
+    row_end: wp.array(dtype=wp.int32),
+    info: wp.array(dtype=wp.int64),
+    lanes: int,
+    # out:
+    row_span: wp.array(dtype=wp.vec3i),
+    row_work: wp.array(dtype=wp.int64),
+):
+    """Row kernel (:mod:`pscc._lanes`) over the live groups g (none when the rows do not fit): the same walk as ``_plan_rows``,
+    writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
+    n_g x (b_end - b_start)."""
+    if info[_LIVE_ROWS] == wp.int64(0):
+        return
+    live = wp.min(int(info[_LIVE_GROUPS]), row_count.shape[0])
+    for g in range(wp.tid(), live, lanes):
+        _write_group_rows(g, entry_key, group_start, group_end, group_cell, cell_end, group_mask, slab, check_keys,
+                          row_count, row_end, row_span, row_work)
 
 @wp.kernel
 def _update_slab_policy(

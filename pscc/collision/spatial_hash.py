@@ -101,6 +101,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import warp as wp
 
+from pscc._lanes import row_lanes
 from pscc._reductions import PrefixSum
 from pscc.collision import _code_mask_kernels as mask_kernels
 from pscc.collision import _hash_row_kernels as row_kernels
@@ -947,22 +948,24 @@ class SpatialHash:
         wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, live_limit],
                   outputs=[self.info], device=dev)
         if slab.enabled:
-            wp.launch(row_kernels._compute_group_slabs, dim=g,
+            wp.launch(row_kernels._compute_group_slabs, dim=row_lanes(dev, g),
                       inputs=[self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                              slab, self.info],
+                              slab, self.info, row_lanes(dev, g)],
                       outputs=[self.group_axis, self.group_slab], device=dev)
-        wp.launch(row_kernels._plan_rows, dim=g,
+        wp.launch(row_kernels._plan_rows, dim=row_lanes(dev, g),
                   inputs=[self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
-                          self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys],
+                          self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys,
+                          row_lanes(dev, g)],
                   outputs=[self.group_mask, self.row_count, self.info], device=dev)
         self._scan(self.row_count, self.row_end, inclusive=True)
         wp.launch(row_kernels._gather_row_info, dim=1,
                   inputs=[self.row_end, self.row_capacity, self.test_threads, self.tests_per_thread,
                           self.cell_code_min_tests],
                   outputs=[self.info], device=dev)
-        wp.launch(row_kernels._write_rows, dim=g,
+        wp.launch(row_kernels._write_rows, dim=row_lanes(dev, g),
                   inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info],
+                          self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info,
+                          row_lanes(dev, g)],
                   outputs=[self.row_span, self.row_work], device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
         wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
