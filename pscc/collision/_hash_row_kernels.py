@@ -181,11 +181,11 @@ def _compute_group_slabs(
     group_slab: wp.array(dtype=wp.vec2),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the live groups: axis = unit normal of its middle face at
-    mid-step (any axis is valid; this one makes the slab of a flat patch thin), slab = its faces' interval on the axis, and the
-    bounding sphere of its vertices (``slab.group_sphere``). A zero axis (a degenerate middle face)
-    marks a group that is never culled. Groups whose cell holds too few other entries for any slab test
-    (``slab.min_work``) are skipped. The first
-    group of each cell also writes the cell's ``slab.group_skip``."""
+    mid-step (any axis is valid; this one makes the slab of a flat patch thin), slab = its faces'
+    interval on the axis, and the bounding sphere of its vertices (``slab.group_sphere``). A zero axis (a
+    degenerate middle face) marks a group that is never culled. Groups whose cell holds too few other
+    entries for any slab test (``slab.min_work``) are skipped. The first group of each cell also writes
+    the cell's ``slab.group_skip``."""
     live = int(info[_LIVE_GROUPS])
     if not slab_test_on(slab):
         return
@@ -534,8 +534,8 @@ def _write_rows(
     row_span: wp.array(dtype=wp.vec3i),
     row_work: wp.array(dtype=wp.int64),
 ):
-    """Row kernel (:mod:`pscc._lanes`) over the live groups g (none when the rows do not fit): the same walk as ``_plan_rows``,
-    writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
+    """Row kernel (:mod:`pscc._lanes`) over the live groups g (none when the rows do not fit): the same
+    walk as ``_plan_rows``, writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
     n_g x (b_end - b_start)."""
     if info[_LIVE_ROWS] == wp.int64(0):
         return

@@ -142,6 +142,7 @@ from pscc.collision.spatial_hash_settings import (
     SpatialHashStats,
     check_integer,
     check_positive,
+    raise_counted_input_errors,
 )
 from pscc.errors import CapacityError, InputError
 from pscc.geometry.dop import vec10
@@ -779,7 +780,7 @@ class SpatialHash:
         summary = self.summary.numpy()
         info = summary.astype(np.int64).tolist()  # Python ints: cheaper to compare than numpy scalars
         ordered, node_limit = self._last_call
-        self._raise_input_errors(info, ordered, node_limit)
+        raise_counted_input_errors(info, ordered, node_limit)
         fits = True
         needs = ((kernels.INFO_ENTRIES, "entry_capacity", MAX_ENTRIES, self._allocate_entries),
                  (kernels.INFO_GROUPS, "group_capacity", MAX_ENTRIES, self._allocate_groups),
@@ -811,23 +812,6 @@ class SpatialHash:
         if fits:
             self._pair_reruns = 0
         return fits
-
-    def _raise_input_errors(self, info: list[int], ordered: bool, node_limit: int) -> None:
-        """The input errors the device path counted, in the order the checks run."""
-        if info[kernels.INFO_BAD_ORDER] > 0:
-            raise InputError("argument", "face_order", "is not a permutation of the faces",
-                             "pass each face id exactly once")
-        if info[kernels.INFO_BAD_BOXES] > 0:
-            raise InputError("argument", "face_lower/face_upper",
-                             f"{int(info[kernels.INFO_BAD_BOXES])} boxes hold NaN/Inf or have lower > upper on "
-                             "some axis", "pass finite boxes with lower <= upper")
-        if node_limit > 0 and info[kernels.INFO_BAD_NODES] > 0:
-            raise InputError("argument", "node_id",
-                             f"{int(info[kernels.INFO_BAD_NODES])} node ids lie outside [0, {node_limit})",
-                             "pass node ids below node_id_bound, or node_id_bound=None")
-        if ordered and info[kernels.INFO_SAME_NODE] > 0:
-            raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
-                             "pass an order in which equal node ids are adjacent, or None")
 
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when
@@ -947,26 +931,24 @@ class SpatialHash:
         live_limit = min(g, self.slab_capacity) if slab.enabled else g
         wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, live_limit],
                   outputs=[self.info], device=dev)
+        lanes = row_lanes(dev, g)  # the group passes are row kernels over the group slots
         if slab.enabled:
-            wp.launch(row_kernels._compute_group_slabs, dim=row_lanes(dev, g),
-                      inputs=[self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                              slab, self.info, row_lanes(dev, g)],
-                      outputs=[self.group_axis, self.group_slab], device=dev)
-        wp.launch(row_kernels._plan_rows, dim=row_lanes(dev, g),
-                  inputs=[self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell,
-                          self.cell_end, self.group_axis, self.group_slab, slab, self.grid, check_keys,
-                          row_lanes(dev, g)],
-                  outputs=[self.group_mask, self.row_count, self.info], device=dev)
+            wp.launch(row_kernels._compute_group_slabs, dim=lanes, inputs=[
+                self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end, slab, self.info,
+                lanes], outputs=[self.group_axis, self.group_slab], device=dev)
+        wp.launch(row_kernels._plan_rows, dim=lanes, inputs=[
+            self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
+            self.group_axis, self.group_slab, slab, self.grid, check_keys, lanes],
+            outputs=[self.group_mask, self.row_count, self.info], device=dev)
         self._scan(self.row_count, self.row_end, inclusive=True)
         wp.launch(row_kernels._gather_row_info, dim=1,
                   inputs=[self.row_end, self.row_capacity, self.test_threads, self.tests_per_thread,
                           self.cell_code_min_tests],
                   outputs=[self.info], device=dev)
-        wp.launch(row_kernels._write_rows, dim=row_lanes(dev, g),
-                  inputs=[self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end,
-                          self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info,
-                          row_lanes(dev, g)],
-                  outputs=[self.row_span, self.row_work], device=dev)
+        wp.launch(row_kernels._write_rows, dim=lanes, inputs=[
+            self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end, self.group_mask, slab,
+            check_keys, self.row_count, self.row_end, self.info, lanes], outputs=[self.row_span, self.row_work],
+            device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
         wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
                   outputs=[self.code_masks], device=dev)

@@ -37,6 +37,7 @@ __all__ = [
     "SpatialHashStats",
     "check_integer",
     "check_positive",
+    "raise_counted_input_errors",
 ]
 
 DEFAULT_CELL_SIZE_FACTOR: float = 3.0
@@ -227,3 +228,22 @@ def check_positive(value: float, name: str) -> float:
     if not math.isfinite(number) or number <= 0.0:
         raise InputError("argument", name, f"{value!r} is not a finite number > 0", "pass a finite float > 0")
     return number
+
+
+def raise_counted_input_errors(info: list[int], ordered: bool, node_limit: int) -> None:
+    """Raise the input errors that a spatial hash call counted on the device (``info``: its counters as
+    Python ints), in the order the checks run."""
+    if info[kernels.INFO_BAD_ORDER] > 0:
+        raise InputError("argument", "face_order", "is not a permutation of the faces",
+                         "pass each face id exactly once")
+    if info[kernels.INFO_BAD_BOXES] > 0:
+        raise InputError("argument", "face_lower/face_upper",
+                         f"{int(info[kernels.INFO_BAD_BOXES])} boxes hold NaN/Inf or have lower > upper on "
+                         "some axis", "pass finite boxes with lower <= upper")
+    if node_limit > 0 and info[kernels.INFO_BAD_NODES] > 0:
+        raise InputError("argument", "node_id",
+                         f"{int(info[kernels.INFO_BAD_NODES])} node ids lie outside [0, {node_limit})",
+                         "pass node ids below node_id_bound, or node_id_bound=None")
+    if ordered and info[kernels.INFO_SAME_NODE] > 0:
+        raise InputError("argument", "face_order", "faces of one node are not contiguous in it",
+                         "pass an order in which equal node ids are adjacent, or None")
