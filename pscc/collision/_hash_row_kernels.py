@@ -77,6 +77,19 @@ def _project_group(
     return wp.vec2(lo, hi)
 
 
+@wp.struct
+class GroupTables:
+    """The sorted entries and the group and cell ranges that the group passes read, bundled for the kernels
+    (layout in :mod:`pscc.collision.spatial_hash`)."""
+
+    entry_key: wp.array(dtype=wp.int64)
+    entry_face: wp.array(dtype=wp.int32)
+    group_start: wp.array(dtype=wp.int32)
+    group_end: wp.array(dtype=wp.int32)
+    group_cell: wp.array(dtype=wp.int32)
+    cell_end: wp.array(dtype=wp.int32)
+
+
 @wp.func
 def _group_slab(
     g: int,
@@ -168,11 +181,7 @@ def _group_slab(
 @wp.kernel
 def _compute_group_slabs(
     # in:
-    entry_face: wp.array(dtype=wp.int32),
-    group_start: wp.array(dtype=wp.int32),
-    group_end: wp.array(dtype=wp.int32),
-    group_cell: wp.array(dtype=wp.int32),
-    cell_end: wp.array(dtype=wp.int32),
+    tables: GroupTables,
     slab: SlabArgs,
     info: wp.array(dtype=wp.int64),
     lanes: int,
@@ -189,6 +198,12 @@ def _compute_group_slabs(
     live = int(info[_LIVE_GROUPS])
     if not slab_test_on(slab):
         return
+    # Arrays out of the struct once: on the CPU every struct member access copies the array header.
+    entry_face = tables.entry_face
+    group_start = tables.group_start
+    group_end = tables.group_end
+    group_cell = tables.group_cell
+    cell_end = tables.cell_end
     for g in range(wp.tid(), wp.min(live, group_slab.shape[0]), lanes):
         _group_slab(g, live, entry_face, group_start, group_end, group_cell, cell_end, slab, group_axis, group_slab)
 
@@ -389,12 +404,7 @@ def _plan_group_rows(
 @wp.kernel
 def _plan_rows(
     # in:
-    entry_key: wp.array(dtype=wp.int64),
-    entry_face: wp.array(dtype=wp.int32),
-    group_start: wp.array(dtype=wp.int32),
-    group_end: wp.array(dtype=wp.int32),
-    group_cell: wp.array(dtype=wp.int32),
-    cell_end: wp.array(dtype=wp.int32),
+    tables: GroupTables,
     group_axis: wp.array(dtype=wp.vec3),
     group_slab: wp.array(dtype=wp.vec2),
     slab: SlabArgs,
@@ -418,12 +428,19 @@ def _plan_rows(
     is one run, added in O(1), its mask bits set; for a group of one or two entries, a stretch of later
     groups too small for a slab test with it is passed in O(1) too."""
     live = int(info[_LIVE_GROUPS])
+    entry_key = tables.entry_key
+    entry_face = tables.entry_face
+    group_start = tables.group_start
+    group_end = tables.group_end
+    group_cell = tables.group_cell
+    cell_end = tables.cell_end
     for g in range(wp.tid(), row_count.shape[0], lanes):
         if g >= live:
             row_count[g] = 0
         else:
             _plan_group_rows(g, live, entry_key, entry_face, group_start, group_end, group_cell, cell_end, group_axis,
                              group_slab, slab, grid, check_keys, group_mask, row_count, info)
+
 
 @wp.kernel
 def _gather_row_info(
@@ -518,11 +535,7 @@ def _write_group_rows(
 @wp.kernel
 def _write_rows(
     # in:
-    entry_key: wp.array(dtype=wp.int64),
-    group_start: wp.array(dtype=wp.int32),
-    group_end: wp.array(dtype=wp.int32),
-    group_cell: wp.array(dtype=wp.int32),
-    cell_end: wp.array(dtype=wp.int32),
+    tables: GroupTables,
     group_mask: wp.array(dtype=wp.uint64),
     slab: SlabArgs,
     check_keys: int,
@@ -535,14 +548,20 @@ def _write_rows(
     row_work: wp.array(dtype=wp.int64),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the live groups g (none when the rows do not fit): the same
-    walk as ``_plan_rows``, writing each run of passing later groups as the row (g, b_start, b_end) with its BV tests
-    n_g x (b_end - b_start)."""
+    walk as ``_plan_rows``, writing each run of passing later groups as the row (g, b_start, b_end) with
+    its BV tests n_g x (b_end - b_start)."""
     if info[_LIVE_ROWS] == wp.int64(0):
         return
     live = wp.min(int(info[_LIVE_GROUPS]), row_count.shape[0])
+    entry_key = tables.entry_key
+    group_start = tables.group_start
+    group_end = tables.group_end
+    group_cell = tables.group_cell
+    cell_end = tables.cell_end
     for g in range(wp.tid(), live, lanes):
         _write_group_rows(g, entry_key, group_start, group_end, group_cell, cell_end, group_mask, slab, check_keys,
                           row_count, row_end, row_span, row_work)
+
 
 @wp.kernel
 def _update_slab_policy(

@@ -932,13 +932,15 @@ class SpatialHash:
         wp.launch(kernels._gather_table_info, dim=1, inputs=[self.group_rank, self.cell_rank, live_limit],
                   outputs=[self.info], device=dev)
         lanes = row_lanes(dev, g)  # the group passes are row kernels over the group slots
+        tables = row_kernels.GroupTables()
+        tables.entry_key, tables.entry_face = self.entry_key, self.entry_face
+        tables.group_start, tables.group_end = self.group_start, self.group_end
+        tables.group_cell, tables.cell_end = self.group_cell, self.cell_end
         if slab.enabled:
-            wp.launch(row_kernels._compute_group_slabs, dim=lanes, inputs=[
-                self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end, slab, self.info,
-                lanes], outputs=[self.group_axis, self.group_slab], device=dev)
+            wp.launch(row_kernels._compute_group_slabs, dim=lanes, inputs=[tables, slab, self.info, lanes],
+                      outputs=[self.group_axis, self.group_slab], device=dev)
         wp.launch(row_kernels._plan_rows, dim=lanes, inputs=[
-            self.entry_key, self.entry_face, self.group_start, self.group_end, self.group_cell, self.cell_end,
-            self.group_axis, self.group_slab, slab, self.grid, check_keys, lanes],
+            tables, self.group_axis, self.group_slab, slab, self.grid, check_keys, lanes],
             outputs=[self.group_mask, self.row_count, self.info], device=dev)
         self._scan(self.row_count, self.row_end, inclusive=True)
         wp.launch(row_kernels._gather_row_info, dim=1,
@@ -946,9 +948,8 @@ class SpatialHash:
                           self.cell_code_min_tests],
                   outputs=[self.info], device=dev)
         wp.launch(row_kernels._write_rows, dim=lanes, inputs=[
-            self.entry_key, self.group_start, self.group_end, self.group_cell, self.cell_end, self.group_mask, slab,
-            check_keys, self.row_count, self.row_end, self.info, lanes], outputs=[self.row_span, self.row_work],
-            device=dev)
+            tables, self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info, lanes],
+            outputs=[self.row_span, self.row_work], device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
         wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
                   outputs=[self.code_masks], device=dev)
