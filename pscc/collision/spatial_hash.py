@@ -192,7 +192,7 @@ class SpatialHash:
             the cell size (>= 1).
         pair_capacity: initial pair slots (default 4 x face_count); grown to the exact need.
         tests_per_launch: bounds the test launch to ceil(tests_per_launch / tests_per_thread)
-            threads (and to ``DEFAULT_TEST_THREADS``); the launch size is fixed at construction.
+            threads (and to ``test_threads``); the launch size is fixed at construction.
         tests_per_thread: the fewest BV tests each thread of the test kernel runs back to back (a
             thread runs a contiguous chunk of max(this, ceil(tests / threads)) tests, found with one
             binary search). ``None``: 1 on a GPU (one thread per BV test while the tests fit the
@@ -227,6 +227,8 @@ class SpatialHash:
             instead, and neither its cells nor its length reach the grid, so it does not coarsen the
             cell size for everything else (:mod:`pscc.collision._wide_face_kernels`). A call that finds
             more (or more than face_count / 8) inserts every face. 0: never. The pairs are the same.
+        test_threads: threads of the test launch (``None``: ``DEFAULT_TEST_THREADS``, 1 on the CPU); the
+            pairs and their order are the same for any count.
 
     Raises:
         InputError: invalid arguments.
@@ -253,6 +255,7 @@ class SpatialHash:
         cell_code_min_tests: int = CELL_CODE_MIN_TESTS,
         code_mask_min_run: int = CODE_MASK_MIN_RUN,
         max_wide_faces: int = DEFAULT_MAX_WIDE_FACES,
+        test_threads: int | None = None,
     ) -> None:
         self.sort_pairs = bool(sort_pairs)
         self.group_slab_test = bool(group_slab_test)
@@ -339,7 +342,9 @@ class SpatialHash:
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
         self._no_diagonals = wp.empty(0, dtype=vec10, device=dev)
         kind = "cuda" if self.device.is_cuda else "cpu"
-        self.test_threads = max(1, min(DEFAULT_TEST_THREADS[kind], -(-tests_per_launch // self.tests_per_thread)))
+        threads = DEFAULT_TEST_THREADS[kind] if test_threads is None else check_integer(
+            test_threads, "test_threads", 1, 2**30, "pass a positive integer or None")
+        self.test_threads = max(1, min(threads, -(-tests_per_launch // self.tests_per_thread)))
         self.cell_bits = min(31, max(MIN_CELL_BITS, m.bit_length()))
         self._lent: wp.array | None = None
         self._scratch_source: Callable[[], Sequence[wp.array]] | None = None

@@ -320,8 +320,8 @@ def test_buffers_grow(device: str) -> None:
     # Entries grow too: a finer grid needs more than the initial 4 per face.
     hash_ = _check_exact(device, lower, upper, None, cell_size_factor=0.25, pair_capacity=1)
     assert hash_.stats.mean_cells_per_face > 4.0
-    # Small batches of BV tests cover the same range.
-    _check_exact(device, lower, upper, None, tests_per_launch=97)
+    # Small batches of BV tests cover the same range (the CPU's default launch is one thread: ask for more).
+    _check_exact(device, lower, upper, None, tests_per_launch=97, test_threads=2**10)
 
 
 def test_cell_size_factor_does_not_change_pairs(device: str) -> None:
@@ -377,10 +377,13 @@ def test_unsorted_pairs_are_the_same_set(device: str) -> None:
 def test_tests_per_thread_does_not_change_pairs(device: str) -> None:
     lower, upper, _ = _cloth_boxes(1200, seed=8)
     patches = (np.arange(lower.shape[0]) // 30).astype(np.int32)
-    one, hash_one = _run(device, lower, upper, patches, tests_per_thread=1)
-    many, hash_many = _run(device, lower, upper, patches, tests_per_thread=7)
+    one, hash_one = _run(device, lower, upper, patches, tests_per_thread=1, test_threads=2**10)
+    many, hash_many = _run(device, lower, upper, patches, tests_per_thread=7, test_threads=2**10)
+    single, hash_single = _run(device, lower, upper, patches, test_threads=1)
     np.testing.assert_array_equal(one, many)
-    assert hash_one.stats.bv_tests == hash_many.stats.bv_tests
+    np.testing.assert_array_equal(one, single)
+    assert hash_one.test_threads > 1 and hash_many.test_threads > 1 and hash_single.test_threads == 1
+    assert hash_one.stats.bv_tests == hash_many.stats.bv_tests == hash_single.stats.bv_tests
 
 
 def test_device_bytes_counts_every_buffer_it_owns() -> None:
