@@ -54,6 +54,7 @@ from pscc.collision.narrow_phase import (
     edges_certified_apart,
     vertex_face_proximity_toi,
 )
+from pscc.geometry.ccd import NO_HIT
 from pscc.geometry.contact_weights import contact_normal, pair_plane_normal, pair_weights, weighted_sum
 from pscc.geometry.distance import edge_edge_closest_point, vertex_face_closest_point
 from pscc.mesh.topology import MeshTopology
@@ -282,7 +283,7 @@ def _test_and_append(
         toi = float(0.0)
         w = wp.vec4(0.0)
         if edge_edge != 0:
-            toi = float(2.0)  # NO_HIT: certified apart (the narrow phase's own test, bit for bit)
+            toi = float(NO_HIT)  # certified apart: the narrow phase's own test, bit for bit
             if not edges_certified_apart(x0, x1, x2, x3, test.thickness, test.proximity):
                 st = edge_edge_closest_point(x0, x1, x2, x3)
                 toi = edge_edge_proximity_toi(x0, x1, x2, x3, st, test.thickness, test.proximity)
