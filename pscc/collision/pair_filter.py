@@ -9,7 +9,7 @@ have large, overlapping boxes; this test removes most such pairs before feature 
   ``16 u`` times its magnitude companion (the same products with absolute values). The feature-pair
   extraction takes the same per-vertex test from per-face plane slabs instead
   (:mod:`pscc.collision.face_planes`: each face's normal, centre and grown slab computed once per call,
-  so a pair projects three vertices per direction; 30-40 % less time for the test on the corpus frames).
+  so a pair projects three vertices per direction: on `twisting f48` the test took 1.07 instead of 1.6 ms).
 - CCD with thickness 0: the vertex stays strictly on one side of the moving plane during the whole
   step (:func:`pscc.geometry.ccd.vertex_plane_side`, a Bernstein sign test of the coplanarity
   cubic), for the three vertices with the same side.

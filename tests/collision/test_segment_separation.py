@@ -83,3 +83,35 @@ def test_crossing_edges_at_the_threshold() -> None:
     assert _run(points, 0.999)[0]
     for h in (1.0, 1.0001, 3.0):
         assert not _run(points, h)[0]
+
+
+def test_the_narrow_phase_drops_only_pairs_farther_than_the_thickness() -> None:
+    """Two crumpled sheets close to each other, discrete detection with the edge test on and off
+    (``ProximityParameters.edge_separation``): the edge-edge contacts with it are those without it, less only
+    pairs whose float64 distance exceeds the thickness; the test does certify some candidate rows."""
+    from pscc.collision.detector import CollisionDetector
+    from pscc.mesh import grid_sheet
+
+    rng = np.random.default_rng(4)
+    vertices, sheet, _ = grid_sheet(12, 12)
+    n = vertices.shape[0]
+    top = vertices + np.array([0.0, 0.0, 0.03]) + rng.normal(0, 0.01, vertices.shape)
+    x = np.concatenate([vertices + rng.normal(0, 0.01, vertices.shape), top]).astype(np.float32)
+    faces = np.concatenate([sheet, sheet + n]).astype(np.int32)
+    h = 0.02
+    results = []
+    for flag in (0, 1):
+        detector = CollisionDetector(faces, method="brute-force", device="cpu")
+        detector.prepare(x)
+        detector.narrow.proximity.edge_separation = flag
+        results.append(detector.detect(x, thickness=h))
+        rows = detector.candidates.edge_edge.numpy()[: detector.candidates.edge_edge_count]
+        ends = detector.topology.edges[rows]  # (rows, 2 edges, 2 ends)
+    without, with_test = ({tuple(r) for r in res.edge_edge.tolist()} for res in results)
+    assert with_test <= without and len(with_test) > 0
+    x64 = x.astype(np.float64)
+    for a0, a1, b0, b1 in without - with_test:
+        assert _distance(x64[[a0, a1, b0, b1]]) > h
+    np.testing.assert_array_equal(results[0].vertex_face, results[1].vertex_face)
+    certified = _run(x[ends.reshape(-1, 4)], h)
+    assert certified.any()
