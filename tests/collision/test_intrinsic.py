@@ -9,7 +9,13 @@ import pytest
 from pscc.bench.broad_phase import contact_radius, twisted_layers
 from pscc.collision import detector as detector_module
 from pscc.collision.detector import CollisionDetector
-from pscc.collision.intrinsic import FLAT_RATIO, bvh_material, intrinsic_coordinates
+from pscc.collision.intrinsic import (
+    FLAT_RATIO,
+    THIRD_AXIS_GAIN,
+    bvh_material,
+    intrinsic_coordinates,
+    landmark_stress,
+)
 from pscc.mesh.generate import folded_sheet, grid_sheet
 from tests.collision.test_pscc import _assert_same_contacts, _check_dcd_contract, _detectors
 
@@ -106,3 +112,57 @@ def test_a_curved_3d_rest_is_embedded_and_a_flat_or_2d_one_is_used_as_given() ->
         detector.detect(spiral.astype(np.float32), thickness=0.01)
         pairs.append(detector.detect(spiral.astype(np.float32), thickness=0.01).stats["triangle_pairs"])
     assert pairs[0] == pairs[1], pairs
+
+
+def _tube(cells: int, circumference: float, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """A grid sheet welded into a tube along its u side: (faces, positions)."""
+    _, faces, rest = grid_sheet(cells, cells, width=circumference, height=length)
+    u = np.round(rest[:, 0] / circumference * cells).astype(np.int64) % cells
+    w = np.round(rest[:, 1] / length * cells).astype(np.int64)
+    key = u + w * cells
+    angle = 2.0 * np.pi * u / cells
+    radius = circumference / (2.0 * np.pi)
+    positions = np.zeros((cells * (cells + 1), 3))
+    positions[key] = np.stack([radius * np.cos(angle), radius * np.sin(angle), rest[:, 1]], axis=1)
+    return key[faces], positions
+
+
+def test_landmark_stress_is_the_relative_distance_error() -> None:
+    coords = np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]])
+    exact = np.linalg.norm(coords[[0, 1]][:, None] - coords[None], axis=2)
+    assert landmark_stress(coords, np.array([0, 1]), exact) == 0.0
+    # Every distance 10 % too long: the embedding's error is 1/11 of the distances given.
+    assert landmark_stress(coords, np.array([0, 1]), 1.1 * exact) == pytest.approx(0.1 / 1.1)
+    assert landmark_stress(coords, np.array([0]), np.zeros((1, 3))) == 0.0
+
+
+def test_a_sheet_is_laid_flat_and_a_tube_keeps_its_third_axis() -> None:
+    # Folded layers: distances along a sheet are two-dimensional, the third axis would be noise.
+    mesh = folded_sheet(1200, layers=3, seed=2)
+    sheet = intrinsic_coordinates(mesh.faces, mesh.vertices_end.astype(np.float64))
+    assert np.all(sheet[:, 2] == 0.0)
+    assert np.ptp(sheet[:, 1]) > 0.1 * np.ptp(sheet[:, 0])
+    # A tube laid flat would put its two sides on each other: its third axis removes most of the error.
+    faces, positions = _tube(40, 1.0, 2.0)
+    tube = intrinsic_coordinates(faces, positions)
+    assert np.ptp(tube[:, 2]) > 0.2 * np.ptp(tube[:, 0])
+    # Opposite sides of the tube stay apart in the embedding (half the circumference along the surface).
+    front = np.flatnonzero((np.abs(positions[:, 1]) < 1e-9) & (positions[:, 0] > 0.0))
+    back = np.flatnonzero((np.abs(positions[:, 1]) < 1e-9) & (positions[:, 0] < 0.0))
+    by_height = {round(float(positions[i, 2]), 6): i for i in back}
+    gaps = [np.linalg.norm(tube[i] - tube[by_height[round(float(positions[i, 2]), 6)]]) for i in front]
+    assert np.median(gaps) > 0.25
+
+
+def test_the_third_axis_rule_is_the_measured_gain(monkeypatch: pytest.MonkeyPatch) -> None:
+    # With the gain required set above what any piece reaches, the tube is laid flat too, and with it
+    # set below zero, the sheet keeps its third axis: the rule, not the data, decides.
+    from pscc.collision import intrinsic
+
+    faces, positions = _tube(24, 1.0, 2.0)
+    monkeypatch.setattr(intrinsic, "THIRD_AXIS_GAIN", 1.0)
+    assert np.all(intrinsic_coordinates(faces, positions)[:, 2] == 0.0)
+    mesh = folded_sheet(600, layers=2, seed=1)
+    monkeypatch.setattr(intrinsic, "THIRD_AXIS_GAIN", -1.0)
+    assert np.ptp(intrinsic_coordinates(mesh.faces, mesh.vertices_end.astype(np.float64))[:, 2]) > 0.0
+    assert 0.0 < THIRD_AXIS_GAIN < 1.0
