@@ -64,7 +64,7 @@ class CandidatePairs:
         self.device = device
         self._allocate(max(1, int(capacity_vf)), max(1, int(capacity_ee)))
         self.counts = wp.zeros(2, dtype=wp.int32, device=device)
-        self._host_counts = np.zeros(2, dtype=np.int64)
+        self._host_counts: np.ndarray | None = np.zeros(2, dtype=np.int64)  # None: accepted unread
         self.initial_capacities = (max(1, int(capacity_vf)), max(1, int(capacity_ee)))
         """The slots the buffers were made with: room for contact before it happens, which
         :meth:`trim` does not go below."""
@@ -147,15 +147,28 @@ class CandidatePairs:
         if capacity_vf < self.capacity_vf or capacity_ee < self.capacity_ee:
             self._allocate(min(capacity_vf, self.capacity_vf), min(capacity_ee, self.capacity_ee))
 
+    def accept_unread(self) -> None:
+        """Accept the last run without reading its counters (a caller's device verdict,
+        :mod:`pscc.collision.capacity_verdict`, found both within their capacities):
+        :attr:`vertex_face_count` and :attr:`edge_edge_count` then read them when asked. Capture-safe: no."""
+        self._host_counts = None
+
+    def _read_counts(self) -> np.ndarray:
+        if self._host_counts is None:
+            self._host_counts = self.counts.numpy().astype(np.int64)
+        return self._host_counts
+
     @property
     def vertex_face_count(self) -> int:
-        """Vertex-face pairs found by the last run, as read by the last :meth:`fits` (host value)."""
-        return int(self._host_counts[0])
+        """Vertex-face pairs found by the last run, as read by the last :meth:`fits` (host value; read
+        now after :meth:`accept_unread`)."""
+        return int(self._read_counts()[0])
 
     @property
     def edge_edge_count(self) -> int:
-        """Edge-edge pairs found by the last run, as read by the last :meth:`fits` (host value)."""
-        return int(self._host_counts[1])
+        """Edge-edge pairs found by the last run, as read by the last :meth:`fits` (host value; read
+        now after :meth:`accept_unread`)."""
+        return int(self._read_counts()[1])
 
     def _grown(self, needed: int, name: str) -> int:
         if needed > MAX_CAPACITY:

@@ -30,6 +30,7 @@ from pscc.collision.boxes import PrimitiveBoxes
 from pscc.collision.brute_force import BroadPhaseBruteForce
 from pscc.collision.bvh import MaterialBvh
 from pscc.collision.candidates import CandidatePairs
+from pscc.collision.capacity_verdict import CapacityVerdict
 from pscc.collision.contacts import DeviceContacts
 from pscc.collision.device_topology import DeviceTopology
 from pscc.collision.feature_pairs import FeaturePairs
@@ -215,6 +216,7 @@ class CollisionDetector:
         self._feature_boxes = self.boxes.as_struct()
         self.candidates = CandidatePairs(4 * mesh.face_count, 4 * self.topology.edge_count, device)
         self.narrow = NarrowPhase(self._faces, self._edges, device)
+        self.verdict = CapacityVerdict(device)
         self.narrow.mark_moved(self._previous_t0, self._previous_t0, self._previous_t1, self._previous_t1)
         self.narrow.reserve(self.candidates)
         if self.method == "brute-force":
@@ -448,6 +450,7 @@ class CollisionDetector:
             self.feature_pairs.extract_device(self.spatial_hash.pairs, self.spatial_hash.counts, self.candidates,
                                               x0, x1, h, self._object_ids, self._feature_boxes)
             lap("feature_pairs")
+        self.verdict.judge(None if self.method == "brute-force" else self.spatial_hash, self.candidates)
         # New candidates: the next CCD re-check must test every pair (NaN differs from every position).
         self._previous_t0.fill_(wp.vec3(math.nan, math.nan, math.nan))
         self._broad_mode = "ccd" if x1 is not None else "dcd"
@@ -465,8 +468,17 @@ class CollisionDetector:
             InputError: a deferred input problem found on the device (boxes with NaN/Inf).
             CapacityError: more pairs than int32 buffers can hold.
 
+        Reads one device flag when the call fits (:mod:`pscc.collision.capacity_verdict`: the counters
+        were compared on the device, and the stats read them only when asked); the counters otherwise.
+
         Allocates: when a buffer grows. Capture-safe: no.
         """
+        if self.verdict.fits():
+            if self.method != "brute-force":
+                self.spatial_hash.accept_unread()
+            self.candidates.accept_unread()
+            self.narrow.reserve(self.candidates)
+            return True
         fits = True
         if self.method != "brute-force" and not self.spatial_hash.check_capacity():
             fits = False
@@ -762,7 +774,7 @@ class CollisionDetector:
             "mesh": sum(a.capacity for a in self.device_topology.arrays) + self._object_ids.capacity
             + self._positions_t0.capacity + self._positions_t1.capacity + self.seams.device_bytes,
             "boxes": self.boxes.device_bytes,
-            "candidates": self.candidates.device_bytes,
+            "candidates": self.candidates.device_bytes + self.verdict.device_bytes,
             "narrow_phase": self.narrow.device_bytes + self._previous_t0.capacity + self._previous_t1.capacity,
         }
         if self.method != "brute-force":

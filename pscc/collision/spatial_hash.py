@@ -359,7 +359,7 @@ class SpatialHash:
         self._last_call: tuple[bool, int] | None = None
         self._last_slab = False
         self._stats = SpatialHashStats()
-        self._stats_source: tuple[np.ndarray, int] | None = None  # (summary, reruns) of the last check
+        self._stats_source: tuple[np.ndarray | None, int] | None = None  # (summary or None: unread, reruns)
 
     # ------------------------------------------------------------------ buffers
 
@@ -486,14 +486,10 @@ class SpatialHash:
         """Bytes held on the device, per buffer name."""
         # group_rank, cell_rank and group_start are views into the entry buffers' sort scratch.
         names = ("chunk_lower", "chunk_upper", "chunk_length_sum", "chunk_bad", "chunk_extent", "chunk_long_sum",
-                 "chunk_long_count", "wide_faces",
-                 "scene", "grid", "loop_flag",
-                 "face_cells", "face_end", "grid_max", "info", "counts", "summary", "own_node_id",
-                 "slab_policy", "faces", "entry_key", "entry_value", "code_masks", "cell_end",
-                 "group_end", "group_cell", "group_axis", "group_slab", "group_mask", "group_skip", "group_sphere",
-                 "row_span",
-                 "row_work",
-                 "row_scan", "pairs", "pair_keys")
+                 "chunk_long_count", "wide_faces", "scene", "grid", "loop_flag", "face_cells", "face_end", "grid_max",
+                 "info", "counts", "summary", "own_node_id", "slab_policy", "faces", "entry_key", "entry_value",
+                 "code_masks", "cell_end", "group_end", "group_cell", "group_axis", "group_slab", "group_mask",
+                 "group_skip", "group_sphere", "row_span", "row_work", "row_scan", "pairs", "pair_keys")
         # Tables in a lent buffer (lend_scratch) and faces passed in are the caller's memory: counted as 0.
         borrowed = self._lent_names | ({"faces"} if self.faces_given else set())
         return {name: 0 if name in borrowed else int(getattr(self, name).capacity) for name in names}
@@ -755,14 +751,10 @@ class SpatialHash:
         """The stats of the last :meth:`check_capacity` (made from its counters on first access)."""
         if self._stats_source is not None:
             summary, reruns = self._stats_source
+            summary = self.summary.numpy() if summary is None else summary
             self._stats = SpatialHashStats.from_summary(summary, self.face_count, reruns, self.device_bytes)
             self._stats_source = None
         return self._stats
-
-    @stats.setter
-    def stats(self, value: SpatialHashStats) -> None:
-        self._stats = value
-        self._stats_source = None
 
     def check_capacity(self) -> bool:
         """Sync point: read the counters of the last device call (one copy), raise its deferred input
@@ -818,12 +810,21 @@ class SpatialHash:
             self._pair_reruns = 0
         return fits
 
+    def accept_unread(self) -> None:
+        """Accept the last device call unread (a caller's device verdict, :mod:`pscc.collision.capacity_verdict`,
+        found nothing to grow or raise): :attr:`stats` and :meth:`pairs_numpy` read the counters when asked."""
+        self._stats_source = (None, self._pair_reruns)
+        self._pair_count = -1
+        self._pair_reruns = 0
+
     def pairs_numpy(self) -> np.ndarray:
         """The pairs of the last :meth:`find_pairs` as a (count, 2) int32 array, sorted by (a, b) when
         ``sort_pairs``.
 
         Allocates: yes (host copy). Capture-safe: no.
         """
+        if self._pair_count < 0:
+            self._pair_count = min(int(self.summary.numpy()[kernels.SUMMARY_PAIRS]), self.pair_capacity)
         if self._pair_count == 0:
             return np.zeros((0, 2), dtype=np.int32)
         return self.pairs[: self._pair_count].numpy().reshape(-1, 2).astype(np.int32)
