@@ -388,6 +388,40 @@ def test_an_interrupt_right_after_the_folder_is_claimed_never_leaves_it_running(
     assert json.loads((out / "run.json").read_text())["status"] == "done"
 
 
+@pytest.mark.parametrize("during", ["checkpoint", "frame"])
+def test_a_signal_during_a_write_lands_after_the_run_has_counted_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys, during: str) -> None:
+    # Ctrl-C (or a batch's cancel) while frame 6's checkpoint or frame file is written: the write holds the
+    # signal until it ends. The run must count the written file before the signal lands, so run.json names
+    # the checkpoint on disk and the last frame on disk (it once named the ones before them).
+    from pscc.io.formats import FrameWriter
+
+    out = tmp_path / "r"
+    args = ["simulate", "twist", "--frames", "9", *SMALL, "--checkpoint-every", "3", "--out-dir", str(out)]
+    owner, name = (RunFolder, "save_checkpoint") if during == "checkpoint" else (FrameWriter, "write")
+    real = getattr(owner, name)
+
+    def write_then_signal(self: object, *call_args: object, **kwargs: object) -> None:
+        real(self, *call_args, **kwargs)
+        frame = call_args[1] if during == "checkpoint" else call_args[0]
+        if frame == 6:
+            os.kill(os.getpid(), signal.SIGINT)  # arrives as the write ends
+
+    monkeypatch.setattr(owner, name, write_then_signal)
+    assert main(args) == 130
+    capsys.readouterr()
+    run = json.loads((out / "run.json").read_text())
+    with np.load(out / "checkpoint.npz") as checkpoint:
+        on_disk = int(checkpoint["frame"][0])
+    last_frame = max(int(p.stem.split("_")[1]) for p in (out / "frames").glob("frame_*.npz"))
+    assert run["status"] == "interrupted"
+    assert run["checkpoint"] == on_disk and run["frame"] == last_frame, (run, on_disk, last_frame)
+    assert last_frame == 6
+    monkeypatch.setattr(owner, name, real)
+    assert main([*args, "--resume"]) == 0
+    assert len(list((out / "frames").glob("frame_*.npz"))) == 10
+
+
 def test_keyboard_interrupt_before_a_run_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     def interrupted(args: object) -> int:
         raise KeyboardInterrupt

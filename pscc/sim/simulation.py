@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from pscc._atomic import signals_held
 from pscc.errors import InputError
 from pscc.io.formats import FrameWriter, parse_formats
 from pscc.io.frames import write_frame, write_json_atomic
@@ -86,8 +87,11 @@ class Simulation:
     def _write_current(self, writer: FrameWriter) -> None:
         obstacle_vertices, _ = self.solver.obstacle_mesh(self.time)
         cloth = self.state.positions.numpy()[: self.solver.cloth_vertex_count]
-        writer.write(self.frame, cloth, obstacle_vertices)
-        self._last_written = self.frame
+        # The file and the frame run.json will name change together: a signal held through the write
+        # lands when the block ends, after both (not between them, naming one frame too few).
+        with signals_held():
+            writer.write(self.frame, cloth, obstacle_vertices)
+            self._last_written = self.frame
         if self.scene.stitches is not None and self.frame_stats and self.frame_stats[-1].get("frame") == self.frame:
             # From the positions just written (no extra device read): how far the seams are open.
             self.frame_stats[-1]["seam_gap"] = seam_gap(cloth, self.scene.stitches)
@@ -210,8 +214,9 @@ class Simulation:
                 record = self.step_frame()
                 self._write_current(writer)
                 if self.frame % checkpoint_every == 0 or self.frame == frames:
-                    folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
-                    self._last_checkpoint = self.frame
+                    with signals_held():  # as in _write_current: the checkpoint and the frame run.json names
+                        folder.save_checkpoint(self.checkpoint_state(), self.frame, self.frame_stats)
+                        self._last_checkpoint = self.frame
                 if bar is not None:
                     seams = {} if "seam_gap" not in record else {"seam_gap_mm": f"{1e3 * record['seam_gap']:.2f}"}
                     bar.set_postfix(contacts=record["counts"]["contacts"], ccd_hits=record["counts"]["ccd_hits"],
