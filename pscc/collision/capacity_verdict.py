@@ -18,6 +18,9 @@ that give node ids or an order). So a 0 always means the host check would have f
 
 The capacities are launch arguments, so a recorded graph holds the capacities of its recording; like
 every buffer of the call, they change only in the host check, after which a graph is recorded again.
+A simulator's device step (:mod:`pscc.sim.device_step`) gathers the same counters into its own report
+and never reads the verdict: there the verdict is one one-thread launch and one 4-byte asynchronous copy
+per broad phase, read by nobody.
 
 ========================  ===================  ==============================================
 buffer                    shape, dtype         meaning
