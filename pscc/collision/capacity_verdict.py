@@ -60,8 +60,9 @@ CANDIDATES_BIT: int = 32
 
 @wp.struct
 class HashLimits:
-    """The spatial hash's capacities at launch: ``enabled`` 0 for a detector without a hash (brute force),
-    ``slab_groups`` the slab tables' capacity when the call slab-tested (else the largest int64)."""
+    """The spatial hash's capacities at launch (its :meth:`~pscc.collision.spatial_hash.SpatialHash.overflow_counters`
+    0-4): ``enabled`` 0 for a detector without a hash (brute force), ``slab_groups`` the slab tables' capacity when
+    the call slab-tested (else the hash's entry limit, which the groups never exceed)."""
 
     enabled: wp.int32
     entries: wp.int64

@@ -811,8 +811,8 @@ class SpatialHash:
         return fits
 
     def accept_unread(self) -> None:
-        """Accept the last device call unread (a caller's device verdict, :mod:`pscc.collision.capacity_verdict`,
-        found nothing to grow or raise): :attr:`stats` and :meth:`pairs_numpy` read the counters when asked."""
+        """Accept the last call unread (a caller's device verdict, :mod:`pscc.collision.capacity_verdict`, found
+        nothing to grow or raise): :attr:`stats` and :meth:`pairs_numpy` read the counters, of the last call then."""
         self._stats_source = (None, self._pair_reruns)
         self._pair_count = -1
         self._pair_reruns = 0
