@@ -55,9 +55,12 @@ class ContactConfig:
     with them is now run again without them before it is halved. Since the CCD's conservative advancement
     they cost more than they save (``twisting``: 3.6 instead of 5.5 rounds per step, 1.41 instead of 1.12 s
     per frame)."""
-    projection_iterations: int = 512
-    """Dual iterations of one projection at most (it stops earlier once every gap is within half of
-    (separation - CCD distance) of the separation)."""
+    projection_iterations: int = 256
+    """Dual iterations of one projection at most (it stops earlier once every gap is within
+    :data:`pscc.sim.solver.RESPONSE_TOLERANCE_SHARE` of (separation - CCD distance) of the separation). A
+    projection stopped here is not lost: its multipliers carry over, and the next CCD round adds what it
+    left. On ``twisting`` at 5K (90 frames) 256 instead of 512 ran 264K projection iterations instead of
+    293K, 3,928 CCD rounds instead of 3,973 and 1,420 broad phases instead of 1,466."""
     max_response_rounds: int = 100
     """CCD rounds per step (projection plus zones) before the step is rejected and retried with dt / 2."""
     max_step_halvings: int = 4
