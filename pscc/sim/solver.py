@@ -64,7 +64,7 @@ from pscc.sim.proximity import ProximityContacts
 from pscc.sim.scene import Scene
 from pscc.sim.state import ClothState
 from pscc.sim.untangle import Untangler
-from pscc.tolerances import MAX_COORDINATE
+from pscc.tolerances import CCD_DISTANCE_TOLERANCE, MAX_COORDINATE
 
 wp.set_module_options({"enable_backward": False})
 
@@ -94,7 +94,23 @@ tolerance, ``d_min (1 + sqrt 3 x 0.1)``, :data:`pscc.tolerances.CCD_DISTANCE_TOL
 not found again. At 0.5 (gaps of 0.15 h) ``twisting`` at 5K ran 404K projection iterations and 4,357 CCD
 rounds over its 90 frames; at 0.7, with checks every 8 iterations, 293K and 3,973 (docs/simulator.md). The
 worst seam gap of the ``dance`` garment at 20K went from 0.65 h to 1.36 h with it (issue 13 allows 2 h), through
-the changed trajectory: a tolerance of 0.5 for the seams' constraints alone left it at 1.36 h."""
+the changed trajectory: a tolerance of 0.5 for the seams' constraints alone left it at 1.36 h. Where this share
+would leave gaps within (or within 15 % of) the CCD's band, :func:`response_tolerance` falls back towards 0.5."""
+
+
+def response_tolerance(separation: float, ccd_distance: float) -> float:
+    """The inelastic projection's KKT tolerance [m] for a ``separation`` and a CCD distance [m].
+
+    :data:`RESPONSE_TOLERANCE_SHARE` of the band ``separation - ccd_distance`` where the gaps it leaves,
+    ``separation - tolerance``, stay clear of the CCD's reporting band ``ccd_distance (1 + sqrt 3 x``
+    :data:`pscc.tolerances.CCD_DISTANCE_TOLERANCE` ``)`` by 15 % of what lies between it and the separation;
+    else the larger of that bound and half the band (the rule before the share was raised, which close
+    separations already met inside the CCD's band). At the defaults (0.2 h, 0.1 h) it is the share's 0.07 h
+    (the bound is 0.0703 h)."""
+    band = separation - ccd_distance
+    reported = ccd_distance * (1.0 + math.sqrt(3.0) * CCD_DISTANCE_TOLERANCE)
+    clear = 0.85 * (separation - reported)
+    return min(RESPONSE_TOLERANCE_SHARE * band, max(0.5 * band, clear))
 
 
 def _finite_in_range(positions: np.ndarray) -> bool:
@@ -223,9 +239,8 @@ class ClothSolver:
             raise InputError(scene.name, "material.thickness", "is 0", "give the cloth a thickness > 0 [m]")
         self.ccd_distance = self.contact.ccd_distance_ratio * self.thickness
         self.separation = self.contact.separation_ratio * self.thickness
-        self.response_tolerance = RESPONSE_TOLERANCE_SHARE * (self.separation - self.ccd_distance)
-        """KKT tolerance of the inelastic projection: :data:`RESPONSE_TOLERANCE_SHARE` of the band between the
-        CCD distance and the separation."""
+        self.response_tolerance = response_tolerance(self.separation, self.ccd_distance)
+        """KKT tolerance of the inelastic projection (:func:`response_tolerance`)."""
         self.cloth_face_count = int(scene.faces.shape[0])
         self.projection = InelasticProjection(inverse_mass, self.device,
                                               max_iterations=self.contact.projection_iterations)

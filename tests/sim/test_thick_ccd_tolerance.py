@@ -17,6 +17,7 @@ import pytest
 from pscc.bench.oracle import cloth_crossings
 from pscc.scenes import build_scene
 from pscc.sim.simulation import Simulation
+from pscc.sim.solver import RESPONSE_TOLERANCE_SHARE, response_tolerance
 from pscc.tolerances import CCD_DISTANCE_TOLERANCE
 
 
@@ -41,5 +42,21 @@ def test_the_projection_leaves_solved_pairs_beyond_the_ccd_band() -> None:
     # inside that band would be found again in the next round, so the default tolerance must end short of it.
     solver = Simulation(build_scene("twist", 100), device="cpu").solver
     band = solver.ccd_distance * (1.0 + np.sqrt(3.0) * CCD_DISTANCE_TOLERANCE)
-    assert solver.response_tolerance > 0.0
+    share = RESPONSE_TOLERANCE_SHARE * (solver.separation - solver.ccd_distance)
+    assert solver.response_tolerance == share  # the defaults clear the band with the share itself
     assert solver.separation - solver.response_tolerance > band
+
+
+@pytest.mark.parametrize("separation", [0.105, 0.12, 0.15, 0.18, 0.2, 0.3, 1.0])
+def test_a_close_separation_gets_no_looser_tolerance_than_the_band_allows(separation: float) -> None:
+    # Separations closer to the CCD distance than the defaults: the share is used only where its gaps clear the
+    # CCD's band (by 15 % of the rest), otherwise at most the earlier half of the band, never less.
+    ccd_distance = 0.1
+    tolerance = response_tolerance(separation, ccd_distance)
+    band = ccd_distance * (1.0 + np.sqrt(3.0) * CCD_DISTANCE_TOLERANCE)
+    half = 0.5 * (separation - ccd_distance)
+    assert half - 1e-12 <= tolerance <= RESPONSE_TOLERANCE_SHARE * (separation - ccd_distance) + 1e-12
+    if tolerance > half + 1e-12:
+        assert separation - tolerance >= band + 0.15 * (separation - band) - 1e-12
+    if separation - half > band:  # where the earlier rule cleared the band, this one does too
+        assert separation - tolerance > band
