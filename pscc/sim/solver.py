@@ -623,11 +623,16 @@ class ClothSolver:
         if report[CG_FAILED] and not failed:
             failed = ["the linear solve overflowed"]
         if not failed:
-            if runner.grow_near_full(report) \
-                    | self._trim_projection(int(report[PROJECTION_PEAK]), int(report[CONTACTS])) \
-                    | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]]) \
-                    | self._trim_springs(int(report[CONTACTS])) \
-                    | self._trim_candidates([int(v) for v in report[CANDIDATE_PEAKS:CANDIDATE_PEAKS + 2]]):
+            # A frame that grows a buffer trims none and restarts every trim window: a buffer grown for this
+            # frame's peak would otherwise be trimmed back at once, and grow again on the next (a graph
+            # recorded after every such frame is never replayed).
+            grew = runner.grow_near_full(report)
+            if grew:
+                self._projection_peaks, self._hash_peaks, self._spring_peaks, self._candidate_peaks = [], [], [], []
+            if grew or (self._trim_projection(int(report[PROJECTION_PEAK]), int(report[CONTACTS]))
+                        | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]])
+                        | self._trim_springs(int(report[CONTACTS]))
+                        | self._trim_candidates([int(v) for v in report[CANDIDATE_PEAKS:CANDIDATE_PEAKS + 2]])):
                 self._frame_graph = None  # record again, after an eager frame on the new buffers
                 self._frame_graph_warm = None
             self.time = times[-1]

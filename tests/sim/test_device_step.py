@@ -17,7 +17,7 @@ from pscc.bench.host_traffic import count_host_traffic
 from pscc.scenes import build_scene
 from pscc.sim.contact_config import ContactConfig
 from pscc.sim.simulation import Simulation
-from pscc.sim.solver import GraphUnavailableWarning
+from pscc.sim.solver import TRIM_FRAMES, GraphUnavailableWarning
 
 
 def _intersection_free(sim: Simulation) -> bool:
@@ -155,6 +155,36 @@ def test_springs_and_candidates_grown_ahead_of_need_shrink_back_to_their_peak() 
     # Still room for every contact: the counts of the last frame fit with the trim's margin.
     assert springs.capacity >= 1.25 * springs.host_count
     assert sim.step_frame()["counts"]["device_fallbacks"] == 0
+
+
+def test_a_frame_that_grows_a_buffer_trims_nothing_and_restarts_the_trim_windows() -> None:
+    # A buffer grown for a frame's peak and trimmed back by the same frame grew again on the next:
+    # `twisting` recorded a graph after nearly every frame and replayed almost none.
+    sim = Simulation(build_scene("stack", 300), device="cpu")
+    for _ in range(4):  # the layers land (frames on the host path while the buffers grow)
+        sim.step_frame()
+    solver = sim.solver
+    springs = solver.proximity.springs
+    springs.ensure(40 * springs.capacity)  # far beyond need: trimmed once TRIM_FRAMES frames used little of it
+    solver.integrator.system.reserve_contacts(springs.capacity)
+    solver._frame_graph = None
+    solver._spring_peaks = []  # the window starts with this frame (the landing frames filled some of it)
+    big = springs.capacity
+    runner = solver._device_runner()
+    grow = runner.grow_near_full
+    for _ in range(TRIM_FRAMES - 1):
+        sim.step_frame()
+    assert springs.capacity == big
+    runner.grow_near_full = lambda report: grow(report) or True  # this frame grew a buffer
+    sim.step_frame()  # the eighth frame of the window: it would trim, but it grew
+    runner.grow_near_full = grow
+    assert springs.capacity == big
+    for _ in range(TRIM_FRAMES - 1):  # a new window of TRIM_FRAMES frames starts after the growth
+        assert sim.step_frame()["counts"]["device_fallbacks"] == 0
+    assert springs.capacity == big
+    sim.step_frame()
+    assert springs.capacity < big / 4
+    assert _intersection_free(sim)
 
 
 def test_a_fallback_rebuilds_the_springs_of_the_frame_start() -> None:
