@@ -628,7 +628,7 @@ class ClothSolver:
             # recorded after every such frame is never replayed).
             grew = runner.grow_near_full(report)
             if grew:
-                self._projection_peaks, self._hash_peaks, self._spring_peaks, self._candidate_peaks = [], [], [], []
+                self._restart_trim_windows()
             if grew or (self._trim_projection(int(report[PROJECTION_PEAK]), int(report[CONTACTS]))
                         | self._trim_hash([int(v) for v in report[HASH_PEAKS:HASH_PEAKS + 5]])
                         | self._trim_springs(int(report[CONTACTS]))
@@ -650,6 +650,7 @@ class ClothSolver:
         # The host path sized what overflowed for this frame's need; contact that grew into an overflow
         # usually grows on, so the buffers the failed frame filled beyond 85 % get the headroom too.
         runner.grow_near_full(report)
+        self._restart_trim_windows()
         record["counts"]["device_fallbacks"] = 1
         record["fallback_reason"] = "; ".join(failed)
         record["seconds"]["total"] = time.perf_counter() - started
@@ -701,6 +702,10 @@ class ClothSolver:
         self.projection.trim(target)
         self._projection_peaks = []
         return True
+
+    def _restart_trim_windows(self) -> None:
+        """Forget the frames counted towards every trim (after buffers grew)."""
+        self._projection_peaks, self._hash_peaks, self._spring_peaks, self._candidate_peaks = [], [], [], []
 
     def _projection_floor(self, springs: int) -> int:
         """Constraint slots the projection keeps at least: a quarter per cloth face for collisions, plus one per
