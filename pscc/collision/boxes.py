@@ -9,7 +9,8 @@ vertex_lower/upper      (vertex_count,) vec3   box of the vertex's positions at 
 edge_lower/upper        (edge_count,) vec3     box of the edge's 4 positions
 face_lower/upper        (face_count,) vec3     box of the face's 6 positions
 face_diagonal_lower/    (face_count,) vec10    the face's slabs along the ten diagonal axes of
-upper                   (0 when off)           :mod:`pscc.geometry.dop` (``face_diagonals=True``)
+upper                   (0 when off)           :mod:`pscc.geometry.dop` (``face_diagonals=True``), in
+                                               the call's local frame (origin: vertex 0 at t0)
 ======================  =====================  ===============================================
 
 Every box is grown by half the proximity distance (so two primitives closer than the distance have
@@ -119,7 +120,11 @@ def _compute_face_boxes(
     lower_out[i] = grow_box_lower(lo, hi, half_distance, relative_pad)
     upper_out[i] = grow_box_upper(lo, hi, half_distance, relative_pad)
     if diagonals != 0:
-        slab_lo, slab_hi = face_diagonal_slabs(a, b, c, a1, b1, c1, swept, half_distance, slab_pad)
+        # In the call's local frame (pscc.geometry.dop): the rounding pads then scale with the scene's size,
+        # not with its distance from the origin.
+        origin = positions_t0[0]
+        slab_lo, slab_hi = face_diagonal_slabs(a - origin, b - origin, c - origin, a1 - origin, b1 - origin,
+                                               c1 - origin, swept, half_distance, slab_pad)
         diagonal_lower_out[i] = slab_lo
         diagonal_upper_out[i] = slab_hi
 

@@ -112,7 +112,9 @@ def test_disjoint_slabs_are_farther_apart_than_the_distance(first, second, motio
                                                             half, swept) -> None:
     """Every axis on which the stored (float32) slabs miss each other separates the two faces' exact
     (float64) vertex projections by more than 2 h |a|: the faces, being in the hulls of those
-    vertices, are farther apart than 2 h. Degenerate faces (flatten 0: a segment or a point) included."""
+    vertices, are farther apart than 2 h. Degenerate faces (flatten 0: a segment or a point) included.
+    The slabs are in the call's local frame (origin: vertex 0 at t0), so the exact projections are of
+    the vertices relative to it."""
     a = np.array(first, dtype=np.float64).reshape(3, 3)
     b = np.array(second, dtype=np.float64).reshape(3, 3)
     b = b.mean(axis=0) + flatten * (b - b.mean(axis=0))  # flatten 0: all three vertices at one point
@@ -128,8 +130,10 @@ def test_disjoint_slabs_are_farther_apart_than_the_distance(first, second, motio
     lo = boxes.face_diagonal_lower.numpy().astype(np.float64)
     hi = boxes.face_diagonal_upper.numpy().astype(np.float64)
     points = x0.astype(np.float64) if x1 is None else np.concatenate([x0, x1]).astype(np.float64)
+    points = points - x0[0].astype(np.float64)  # exact: differences of float32 values this close in scale
     owner = np.tile(np.array([0, 0, 0, 1, 1, 1]), points.shape[0] // 6)
-    projections = points @ _AXES.T  # exact in float64 for these float32 inputs (sums of 3 terms)
+    # Within float64 rounding (1e-16 relative), far below the float32 pads the assertions lean on.
+    projections = points @ _AXES.T
     norms = np.linalg.norm(_AXES, axis=1)
     for k in range(_AXES.shape[0]):
         exact = [projections[owner == f, k] for f in (0, 1)]
@@ -138,6 +142,23 @@ def test_disjoint_slabs_are_farther_apart_than_the_distance(first, second, motio
         if lo[0, k] > hi[1, k] or lo[1, k] > hi[0, k]:
             gap = max(exact[0].min() - exact[1].max(), exact[1].min() - exact[0].max())
             assert gap > 2.0 * h * norms[k], f"axis {_AXES[k]} culls faces {gap / norms[k]} apart (distance {2 * h})"
+
+
+@pytest.mark.parametrize("offset", [1000.0, -3000.0])
+def test_a_frame_far_from_the_origin_keeps_its_diagonal_culling(offset: float) -> None:
+    """The slabs' rounding pads scale with the scene's extent, not its distance from the origin (the local
+    frame of :mod:`pscc.geometry.dop`): the twisted layers moved 1,000 or 3,000 units away keep within 1 %
+    of the pairs they keep at the origin (in the world frame they kept 6 % more at 1,000), and every
+    dropped pair there is still farther apart than the distance."""
+    mesh = folded_sheet(1500, layers=3, seed=3)
+    x = _twist(mesh.vertices_end, 0.5)
+    half = 0.25 * float(np.linalg.norm(x[mesh.faces[:, 0]] - x[mesh.faces[:, 1]], axis=1).mean())
+    node = np.arange(mesh.faces.shape[0], dtype=np.int32)
+    near = _find(mesh.faces, x, None, node, half, diagonals=True)[0].shape[0]
+    far_x = (x.astype(np.float64) + offset).astype(np.float32)
+    far = _find(mesh.faces, far_x, None, node, half, diagonals=True)[0].shape[0]
+    assert far <= 1.01 * near, f"{far} pairs kept at {offset} against {near} at the origin"
+    assert _check_conservative(mesh.faces, far_x, None, node, half) > 0
 
 
 @pytest.mark.parametrize("axis", range(10))
