@@ -64,6 +64,15 @@ def test_with_ground_adds_a_ground_piece_below_the_frame() -> None:
     assert np.ptp(ground[:, 0]) == pytest.approx(100 * extent)
 
 
+def test_moved_keeps_the_shape_and_moves_every_vertex() -> None:
+    frame = _twisted_frame(500)
+    moved = frame.moved(1000.0)
+    assert moved.name == "twisted moved 1000" and moved.radius == frame.radius
+    assert moved.positions.dtype == np.float32
+    np.testing.assert_array_equal(moved.positions, (frame.positions.astype(np.float64) + 1000.0).astype(np.float32))
+    assert moved.faces is frame.faces and moved.rest is frame.rest and moved.object_ids is frame.object_ids
+
+
 def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
     result = corpus_bench.bench_frame(_twisted_frame(2000), "cpu", repeats=1, with_newton=False, with_ipctk=False)
     methods = [r["method"] for r in result["rows"]]
@@ -138,4 +147,11 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     text = "\n".join(corpus_bench.report(results))
     assert "| unisex_shirt | 12,736 | pscc (no rest) |" in text and "Targets met:" in text
     assert "| unisex_shirt + ground | 2 |" in text
+    (moved,) = results["moved"]  # the shirt is one of MOVED_FRAMES
+    moved_rows = {r["method"]: r for r in moved["rows"]}
+    assert moved["frame"] == "unisex_shirt moved 1000" and moved["faces"] == 12736
+    # 1,000 units away the culling stays (6,497 pairs at the origin, 6,625 moved; 6,793 with world-frame slabs).
+    assert moved_rows["pscc-no-rest"]["triangle_pairs"] <= 1.03 * pscc["triangle_pairs"]
+    assert moved["ratios"]["pscc-no-rest"]["subset_of_spatial_hash"]
+    assert "| unisex_shirt moved 1000 | pscc (no rest) |" in text
     assert "left out: newton style3d" in text

@@ -120,6 +120,16 @@ class CorpusFrame:
         """The same frame with no rest coordinates."""
         return CorpusFrame(self.name, self.source, self.positions, self.faces, None, self.object_ids, self.radius)
 
+    def moved(self, offset: float = 1000.0) -> CorpusFrame:
+        """The frame moved by ``offset`` length units along each axis (rest coordinates kept as they are):
+        how a frame exported from a scene whose cloth is not at the origin looks. The positions are rounded
+        to float32 after the move, as an exporter would write them. Not an exported frame: a check that the
+        float32 rounding bounds of the detector scale with the frame's extent, not its distance from the
+        origin."""
+        moved = (self.positions.astype(np.float64) + float(offset)).astype(np.float32)
+        return CorpusFrame(f"{self.name} moved {offset:g}", f"{self.source}; moved {offset:g} along each axis",
+                           moved, self.faces, self.rest, self.object_ids, self.radius)
+
     def with_ground(self, scale: float = 50.0) -> CorpusFrame:
         """The frame without rest coordinates plus a ground quad (two triangles, a piece of its own)
         ``scale`` times the frame's extent, two contact radii below its lowest point on the y axis (so it adds
