@@ -130,9 +130,10 @@ def test_disjoint_slabs_are_farther_apart_than_the_distance(first, second, motio
     lo = boxes.face_diagonal_lower.numpy().astype(np.float64)
     hi = boxes.face_diagonal_upper.numpy().astype(np.float64)
     points = x0.astype(np.float64) if x1 is None else np.concatenate([x0, x1]).astype(np.float64)
-    points = points - x0[0].astype(np.float64)  # exact: differences of float32 values this close in scale
+    points = points - x0[0].astype(np.float64)
     owner = np.tile(np.array([0, 0, 0, 1, 1, 1]), points.shape[0] // 6)
-    # Within float64 rounding (1e-16 relative), far below the float32 pads the assertions lean on.
+    # The local-frame differences and projections in float64: exact for most inputs, else within 1e-16
+    # relative, far below the float32 pads the assertions lean on.
     projections = points @ _AXES.T
     norms = np.linalg.norm(_AXES, axis=1)
     for k in range(_AXES.shape[0]):
