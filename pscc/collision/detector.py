@@ -462,7 +462,8 @@ class CollisionDetector:
 
         Returns:
             True when every buffer held its data; False when one grew, and the broad phase (and the
-            narrow phases after it) must run again.
+            narrow phases after it) must run again; a graph recorded before then holds the released
+            buffers and must be recorded again (:class:`pscc.collision.recorded.RecordedDetection`).
 
         Raises:
             InputError: a deferred input problem found on the device (boxes with NaN/Inf).
