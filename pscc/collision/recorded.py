@@ -45,10 +45,13 @@ class RecordedDetection:
 
     def __init__(self, detector: Any, positions: wp.array, positions_end: wp.array | None = None,
                  thickness: float = 0.0) -> None:
-        if not isinstance(positions, wp.array) or (positions_end is not None
-                                                   and not isinstance(positions_end, wp.array)):
-            raise InputError("argument", "positions", "a recorded detection reads device arrays in place",
-                             "pass wp.array(..., dtype=wp.vec3) positions on the detector's device")
+        for name, value in (("positions", positions), ("positions_end", positions_end)):
+            if value is not None and not isinstance(value, wp.array):
+                raise InputError("argument", name, f"a recorded detection reads device arrays in place, got "
+                                 f"{type(value).__name__}",
+                                 "pass wp.array(..., dtype=wp.vec3) positions on the detector's device")
+        if positions is None:
+            raise InputError("argument", "positions", "missing", "pass the positions at the start of the step")
         self.detector = detector
         self.positions = positions
         self.positions_end = positions_end

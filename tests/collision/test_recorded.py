@@ -61,5 +61,8 @@ def test_a_replay_that_overflows_records_the_call_again() -> None:
 def test_host_positions_are_refused() -> None:
     mesh = folded_sheet(200, layers=2, seed=1)
     detector = CollisionDetector(mesh.faces, device=DEVICE)
-    with pytest.raises(InputError, match="positions"):
+    with pytest.raises(InputError, match="positions.*ndarray"):
         RecordedDetection(detector, mesh.vertices_end, thickness=0.01)
+    x = wp.array(mesh.vertices_end, dtype=wp.vec3, device=DEVICE)
+    with pytest.raises(InputError, match="positions_end"):
+        RecordedDetection(detector, x, mesh.vertices_end, thickness=0.01)
