@@ -13,7 +13,7 @@ import warp as wp
 from pscc.bench.host_traffic import count_host_traffic, device_path_traffic
 from pscc.collision import _spatial_hash_kernels as kernels
 from pscc.collision.intersection import IntersectionCheck
-from pscc.collision.spatial_hash import SpatialHash
+from pscc.collision.spatial_hash import MIN_CELL_BITS, SpatialHash
 from pscc.errors import InputError
 from pscc.mesh import folded_sheet, grid_sheet
 from tests.collision.test_spatial_hash import _reference
@@ -193,11 +193,11 @@ def test_cell_bits_grow_for_large_grids(device: str) -> None:
     upper = (lower + rng.uniform(0.0, 3.0, (300, 3))).astype(np.float32)
     expected = _reference(lower, upper, np.arange(300))
     hash_ = SpatialHash(300, device)
-    assert hash_.cell_bits == 16
+    assert hash_.cell_bits == MIN_CELL_BITS
     args = (wp.array(lower, dtype=wp.vec3, device=device), wp.array(upper, dtype=wp.vec3, device=device))
     hash_.find_pairs_device(*args, cell_size=1.0)
     wanted = int(hash_.summary.numpy()[kernels.INFO_WANTED_CELLS])
-    assert wanted > 2**16
+    assert wanted > 2**MIN_CELL_BITS
     np.testing.assert_array_equal(_valid_pairs(hash_), expected)  # already exact on the coarse grid
     assert not hash_.check_capacity()
     assert hash_.cell_bits == (wanted - 1).bit_length() and hash_.stats.coarsenings > 0
