@@ -140,7 +140,6 @@ class FeatureTopology:
 
     faces: wp.array(dtype=wp.vec3i)
     face_edges: wp.array(dtype=wp.vec3i)
-    edges: wp.array(dtype=wp.vec2i)
     owned_vertex_bits: wp.array(dtype=wp.int32)
     owned_edge_bits: wp.array(dtype=wp.int32)
     seams: SeamArgs
@@ -170,7 +169,6 @@ def _extract_features(
     # Arrays out of the struct once: on the CPU every struct member access copies the array header.
     faces = topology.faces
     face_edges = topology.face_edges
-    edges = topology.edges
     owned_vertex_bits = topology.owned_vertex_bits
     owned_edge_bits = topology.owned_edge_bits
     seams = topology.seams
@@ -222,7 +220,8 @@ def _extract_features(
         vf = _bit_count3(mask_ab) + _bit_count3(mask_ba)
         # Owned edges of b: ids, end points and boxes, loaded once for the 3 x 3 tests. An edge whose
         # two ends are beyond the other face's plane on one side cannot come within the thickness of
-        # that face's edges (they lie in the plane).
+        # that face's edges (they lie in the plane). Edge k of a face joins its vertices k and k + 1
+        # (``MeshTopology.face_edges``), so the ends come from the face, not from the edge table.
         bits_a = owned_edge_bits[a] & ~_beyond_edge_bits(sides_a)
         bits_b = owned_edge_bits[b] & ~_beyond_edge_bits(sides_b)
         ids_a = face_edges[a]
@@ -234,16 +233,15 @@ def _extract_features(
         for k in range(3):
             if (bits_b >> k) & 1:
                 eb = ids_b[k]
-                ends = edges[eb]
-                ends_b0[k] = ends[0]
-                ends_b1[k] = ends[1]
+                ends_b0[k] = tri_b[k]
+                ends_b1[k] = tri_b[(k + 1) % 3]
                 lower_b[k] = edge_lower[eb]
                 upper_b[k] = edge_upper[eb]
         edge_mask = int(0)
         for j in range(3):
             if (bits_a >> j) & 1:
                 ea = ids_a[j]
-                ends_a = edges[ea]
+                ends_a = wp.vec2i(tri_a[j], tri_a[(j + 1) % 3])
                 lower_a = edge_lower[ea]
                 upper_a = edge_upper[ea]
                 for k in range(3):
@@ -315,12 +313,10 @@ class FeaturePairs:
         self.owned_edge_bits = wp.array(edge_bits, dtype=wp.int32, device=device)
         self.face_edges = device_topology.face_edges
         self.faces = device_topology.faces
-        self.edges = device_topology.edges
         self.topology = FeatureTopology()
-        """The faces, face edges, edges and ownership bits as the kernel's struct."""
+        """The faces, face edges and ownership bits as the kernel's struct."""
         self.topology.faces = self.faces
         self.topology.face_edges = self.face_edges
-        self.topology.edges = self.edges
         self.topology.owned_vertex_bits = self.owned_vertex_bits
         self.topology.owned_edge_bits = self.owned_edge_bits
         self.seams = seams if seams is not None else SeamAdjacency(None, 0, device)
