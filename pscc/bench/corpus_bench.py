@@ -22,7 +22,8 @@ two calls made in the same repeat.
 
 The Warp detectors are timed two ways. *Call*: pscc's host ``detect()`` (upload, broad and narrow
 phase, the sorted host rows) and Newton's eager launches. *Graph*: the device-array ``detect()``
-recorded once with ``wp.ScopedCapture`` and replayed (pscc's replay is followed by
+recorded once (pscc: :class:`~pscc.collision.recorded.RecordedDetection`, which fits the hash's tables to
+the call before recording; Newton: ``wp.ScopedCapture``) and replayed (pscc's replay is followed by
 ``check_capacity()``, the counter read a caller needs before trusting the result; Newton's by a sync),
 which is how pscc's simulator runs detection: device arrays in and out, one recorded graph. pscc's
 replay is checked to give the host call's rows. The target ratios compare pscc's replay with the
@@ -44,6 +45,7 @@ import warp as wp
 from pscc.bench.broad_phase import NewtonDetection
 from pscc.bench.corpus import DEFAULT_CACHE_DIR, CorpusFrame, FrameSpec, load_corpus
 from pscc.collision.detector import CollisionDetector
+from pscc.collision.recorded import RecordedDetection
 
 __all__ = ["CORPUS_REPEATS", "GROUND_FRAMES", "QUICK_REPEATS", "TARGETS", "IpctkLbvh", "bench_frame", "report", "run"]
 
@@ -92,12 +94,12 @@ class _PsccRunner:
 
     def record(self) -> None:
         """Record the device-array ``detect()`` (broad and narrow phase, results on the device) into a
-        graph, after one eager call that prepares the structures and sizes the buffers."""
+        graph as a caller does (:class:`~pscc.collision.recorded.RecordedDetection`: an eager call that
+        prepares the structures and sizes the buffers, the hash's tables fitted to it)."""
         self.positions = wp.array(self.frame.positions, dtype=wp.vec3, device=self.detector.device)
-        self.detector.detect(self.positions, thickness=self.frame.radius)
-        with wp.ScopedCapture(device=self.detector.device) as capture:
-            self.contacts = self.detector.detect(self.positions, thickness=self.frame.radius)
-        self.graph = capture.graph
+        recorded = RecordedDetection(self.detector, self.positions, thickness=self.frame.radius)
+        self.contacts = recorded.contacts
+        self.graph = recorded.graph
 
     def replay(self) -> None:
         """One replay of the recorded graph, then the counter read a caller needs to trust it
@@ -384,8 +386,9 @@ def report(results: dict[str, Any]) -> list[str]:
         "an edge met more edges than Newton's default per-edge buffer (32) holds; its count is truncated.",
         "`bytes/tri` is pscc's device memory, Newton's detector arrays (its BVH nodes not counted).",
         "`call s`: pscc's host `detect()` (upload, detection, sorted host rows), Newton's eager launches;",
-        "`graph s`: the device-array detection recorded once (`wp.ScopedCapture`) and replayed, as pscc's",
-        "simulator runs it, plus pscc's one counter read (`check_capacity`) or Newton's sync. Every pscc",
+        "`graph s`: the device-array detection recorded once and replayed, as pscc's simulator runs it (pscc:",
+        "`RecordedDetection`, the hash's tables fitted to the call before recording; Newton: `wp.ScopedCapture`),",
+        "plus pscc's one counter read (`check_capacity`) or Newton's sync. Every pscc",
         "replay gave the host call's rows (checked on every frame).",
         "pscc tests face pairs with 26-DOPs (the box and ten diagonal slabs, `pscc/geometry/dop.py`);",
         "`spatial-hash` is the paper's plain hashing (boxes only), and `spatial-hash (26-DOP)` the same hash",

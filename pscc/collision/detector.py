@@ -39,9 +39,14 @@ from pscc.collision.intrinsic import bvh_material
 from pscc.collision.narrow_phase import NarrowPhase
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
+from pscc.collision.spatial_hash_settings import fitted_capacities
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
 from pscc.mesh.topology import MeshTopology
+
+FITTED_TABLES: tuple[int, ...] = (0, 1, 4)
+"""The spatial hash's tables that :meth:`CollisionDetector.fit_buffers` fits to a call (indices of
+:meth:`~pscc.collision.spatial_hash.SpatialHash.capacities`: entries, groups, slab tables)."""
 
 METHODS: tuple[str, ...] = ("pscc", "spatial-hash", "brute-force")
 """Detection methods of :class:`CollisionDetector`: ``pscc`` (normal-cone test front + paired-key
@@ -487,6 +492,33 @@ class CollisionDetector:
             fits = False
         self.narrow.reserve(self.candidates)
         return fits
+
+    def fit_buffers(self) -> bool:
+        """Shrink the spatial hash's entry, group and slab tables to what the last call used, with room to
+        spare (:func:`~pscc.collision.spatial_hash_settings.fitted_capacities`), for a caller about to record
+        the call into a graph: a replay sorts, pads and scans these tables whole, and a detector starts
+        with 4 entry slots and 1 group slot per face whatever the mesh needs. The work rows and the pair
+        buffer keep their size: their use swings from call to call with the same positions (the group
+        slab test's periodic probe doubles the rows of `cloth_rollers f3` every ninth call). Call it after
+        a call that :meth:`check_capacity` accepted; it reads that call's counters (a sync point).
+
+        Returns:
+            True when a table shrank: run the call again before recording it (it grows back, through
+            :meth:`check_capacity`, if the next positions need more). A graph recorded before must be
+            recorded again. :class:`pscc.collision.recorded.RecordedDetection` does both.
+
+        Allocates: when a table shrinks. Capture-safe: no.
+        """
+        if self.method == "brute-force":
+            return False
+        counters = self.spatial_hash.overflow_counters()[:5]
+        copies = {id(array): array.numpy() for array, _, _ in counters}  # two arrays: one read each
+        used = {k: int(copies[id(array)][index]) for k, (array, index, _) in enumerate(counters)}
+        capacities = {k: c for k, c in self.spatial_hash.capacities().items() if k in FITTED_TABLES}
+        targets = fitted_capacities(capacities, used)
+        if targets:
+            self.spatial_hash.trim(targets)
+        return bool(targets)
 
     def front_count(self) -> wp.array | None:
         """The test front's size as a (1,) int32 device array (``pscc`` only, else ``None``)."""

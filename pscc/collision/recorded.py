@@ -8,7 +8,9 @@ released: replayed again it would write into released memory and leave the new b
 project's CPU, a `cloth_rollers` frame replayed that way reported 0 triangle pairs and a capacity verdict
 that fits). So after a False the detection must run again and be recorded again.
 :class:`RecordedDetection` does both: :meth:`RecordedDetection.replay` launches the graph, checks, and
-on a False records a new graph and replays that, until the call fits.
+on a False records a new graph and replays that, until the call fits. Before each recording it fits the
+spatial hash's tables to the call (``fit``, on by default): a detector starts with 4 entry slots per face,
+and a replay sorts, pads and scans all of them.
 
 It covers the buffers the check grows. A caller that changes the detector otherwise between replays
 (:meth:`~pscc.collision.detector.CollisionDetector.lend_scratch`, ``refresh_loans``, ``set_joined``, a
@@ -38,13 +40,16 @@ class RecordedDetection:
         positions: ``wp.array`` of ``wp.vec3`` on the detector's device, positions at the start of the step.
         positions_end: the same at the end of the step (CCD), or ``None`` (DCD).
         thickness: the proximity distance, as for :meth:`~pscc.collision.detector.CollisionDetector.detect`.
+        fit: shrink the hash's tables to what the call uses before each recording
+            (:meth:`~pscc.collision.detector.CollisionDetector.fit_buffers`): a replay then sorts and scans
+            no empty slots. Pass False to keep the detector's capacities as they are.
 
     Raises:
         InputError: positions that are not device arrays of the detector (as ``detect`` says).
     """
 
     def __init__(self, detector: Any, positions: wp.array, positions_end: wp.array | None = None,
-                 thickness: float = 0.0) -> None:
+                 thickness: float = 0.0, fit: bool = True) -> None:
         for name, value in (("positions", positions), ("positions_end", positions_end)):
             if value is not None and not isinstance(value, wp.array):
                 raise InputError("argument", name, f"a recorded detection reads device arrays in place, got "
@@ -56,6 +61,7 @@ class RecordedDetection:
         self.positions = positions
         self.positions_end = positions_end
         self.thickness = float(thickness)
+        self.fit = bool(fit)
         self.graph: Any = None
         self.contacts: DeviceContacts | None = None
         self.recordings = 0
@@ -63,12 +69,16 @@ class RecordedDetection:
         self.record()
 
     def record(self) -> None:
-        """Run the call once outside a capture (it grows what it needs and checks), then record it.
+        """Run the call once outside a capture (it grows what it needs and checks), fit the hash's tables
+        to it (:meth:`~pscc.collision.detector.CollisionDetector.fit_buffers`; after a fit the call runs
+        once more), then record it.
 
-        Allocates: when a buffer grows. Capture-safe: no.
+        Allocates: when a buffer grows or shrinks. Capture-safe: no.
         """
         detector = self.detector
         detector.detect(self.positions, self.positions_end, self.thickness)
+        if self.fit and detector.fit_buffers():
+            detector.detect(self.positions, self.positions_end, self.thickness)
         with wp.ScopedCapture(device=detector.device) as capture:
             self.contacts = detector.detect(self.positions, self.positions_end, self.thickness)
         self.graph = capture.graph

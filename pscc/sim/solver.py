@@ -39,6 +39,7 @@ from pscc._checks import check_coordinate_range, check_object_ids, unused_object
 from pscc._memory import SIMULATION_BYTES_PER_TRIANGLE, check_fits
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.intersection import IntersectionCheck
+from pscc.collision.spatial_hash_settings import fitted_capacities
 from pscc.errors import InputError, PsccError
 from pscc.geometry.distance import edge_edge_distance, vertex_face_distance
 from pscc.sim.contact_config import CCD_INSIDE_SHARE, ContactConfig
@@ -763,19 +764,16 @@ class ClothSolver:
         return True
 
     def _trim_hash(self, peaks: list[int]) -> bool:
-        """Shrink the hash tables (to 1.25 x the recent peak) once the last :data:`TRIM_FRAMES` frames used
-        less than two thirds of them: growth ahead of need while contact builds up leaves slack that the
-        settled contact does not use. Returns whether the buffers changed."""
+        """Shrink the hash tables (:func:`~pscc.collision.spatial_hash_settings.fitted_capacities`: to 1.25 x
+        the recent peak) once the last :data:`TRIM_FRAMES` frames used less than two thirds of them: growth
+        ahead of need while contact builds up leaves slack that the settled contact does not use. Returns
+        whether the buffers changed."""
         spatial_hash = self.intersection_check.spatial_hash  # the detector's, when it hashes
         self._hash_peaks = (self._hash_peaks + [peaks])[-TRIM_FRAMES:]
         if len(self._hash_peaks) < TRIM_FRAMES:
             return False
-        capacities = spatial_hash.capacities()
-        targets = {}
-        for k in range(5):
-            peak = max(frame[k] for frame in self._hash_peaks)
-            if capacities[k] > 1.5 * peak + TRIM_SLACK:
-                targets[k] = int(1.25 * peak) + TRIM_SLACK // 2
+        recent_peaks = {k: max(frame[k] for frame in self._hash_peaks) for k in range(5)}
+        targets = fitted_capacities(spatial_hash.capacities(), recent_peaks)
         if not targets:
             return False
         spatial_hash.trim(targets)
