@@ -572,24 +572,35 @@ def _update_slab_policy(
     test_cost: wp.int64,
     group_cost: wp.int64,
     probe_interval: int,
+    max_backoff: int,
     # out:
     policy: wp.array(dtype=wp.int32),
 ):
-    """A single thread, after the test pass: whether the next call slab-tests. A call that did keeps it
-    on when the face tests its separated group pairs saved outweigh what the test cost (``test_cost``
-    face tests per slab test and ``group_cost`` per group of the call); a call that did not counts, and
-    the ``probe_interval``-th such call turns it on again, to measure anew. A call whose rows or pairs
-    did not fit its buffers changes nothing: it is run again, and the run again decides."""
+    """A single thread, after the test pass: whether the next call slab-tests. ``policy`` = [state, calls]:
+    state 1 runs the test (``calls`` then holds the backoff level a probe started from), state -L <= 0
+    skips it at backoff level L (``calls``: calls since the last test). A call that slab-tested keeps the
+    test on when the face tests its separated group pairs saved outweigh what the test cost (``test_cost``
+    face tests per slab test and ``group_cost`` per group of the call), else turns it off: at level 0
+    after calls on which it paid, one level higher (at most ``max_backoff``) after a probe that found it
+    still does not pay. The (``probe_interval`` x 2^L)-th call without the test probes it again. A call
+    whose rows or pairs did not fit its buffers changes nothing: it is run again, and the run again
+    decides."""
     if info[_LIVE_ROWS] == wp.int64(0) or counts[0] > pair_capacity:
         return
-    if policy[0] != 0:
+    if policy[0] > 0:
         cost = info[_SLAB_TESTS] * test_cost + info[_LIVE_GROUPS] * group_cost
-        policy[0] = int(info[_SLAB_SAVED] > cost)
-        policy[1] = 0
-    else:
-        policy[1] = policy[1] + 1
-        if policy[1] >= probe_interval:
+        if info[_SLAB_SAVED] > cost:
             policy[0] = 1
+            policy[1] = 0
+        else:
+            policy[0] = -wp.min(policy[1], max_backoff)
+            policy[1] = 0
+    else:
+        level = -policy[0]
+        policy[1] = policy[1] + 1
+        if policy[1] >= probe_interval << level:
+            policy[0] = 1
+            policy[1] = level + 1
 
 
 @wp.func

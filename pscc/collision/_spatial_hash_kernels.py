@@ -196,7 +196,7 @@ class SlabArgs:
 def slab_test_on(slab: SlabArgs) -> bool:
     """Whether this call runs the group slab test: configured (``enabled``) and chosen by the policy
     the last slab-testing call left (``_update_slab_policy``)."""
-    return slab.enabled != 0 and slab.policy[0] != 0
+    return slab.enabled != 0 and slab.policy[0] > 0
 
 
 @wp.func

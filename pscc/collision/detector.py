@@ -39,7 +39,7 @@ from pscc.collision.intrinsic import bvh_material
 from pscc.collision.narrow_phase import NarrowPhase
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
-from pscc.collision.spatial_hash_settings import fitted_capacities
+from pscc.collision.spatial_hash_settings import SLAB_PROBE_BACKOFF, fitted_capacities
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import validate_mesh
 from pscc.mesh.topology import MeshTopology
@@ -302,8 +302,9 @@ class CollisionDetector:
             self.front.load_state_dict(front_state)
         if self.front is not None and "hash_slab_policy" in state:  # absent from older checkpoints
             policy = np.asarray(state["hash_slab_policy"]).reshape(-1)
-            if policy.shape != (2,) or policy[0] not in (0, 1) or policy[1] < 0:
-                raise InputError("checkpoint", "hash_slab_policy", f"{policy.tolist()} is not [0 or 1, calls >= 0]",
+            if policy.shape != (2,) or not -SLAB_PROBE_BACKOFF <= policy[0] <= 1 or policy[1] < 0:
+                raise InputError("checkpoint", "hash_slab_policy",
+                                 f"{policy.tolist()} is not [-{SLAB_PROBE_BACKOFF} to 1, calls >= 0]",
                                  "restore a checkpoint written by this version of pscc")
             self.spatial_hash.slab_policy.assign(policy.astype(np.int32))
 

@@ -65,8 +65,8 @@ group_skip                 (S,) vec3i            slab test only: largest later g
                                                  groups too small to slab-test in O(1))
 group_sphere               (S,) vec4             slab test only: centre and radius bounding group g's
                                                  vertices (the O(1) bound of the slab test)
-slab_policy                (2,) int32            kept across calls: [this call slab-tests, calls since
-                                                 the last one that did] (docs/spatial-hash.md §3a)
+slab_policy                (2,) int32            kept across calls: [1 this call slab-tests, or -level of
+                                                 the probe backoff; a counter] (docs/spatial-hash.md §3a)
 row_count / row_end        (G,) int32            rows of group g / inclusive scan (in the rank buffers)
 row_span                   (R,) vec3i            work row r = (g, b_start, b_end): entries of group g
                                                  against entries [b_start, b_end) of its cell
@@ -134,6 +134,7 @@ from pscc.collision.spatial_hash_settings import (
     MIN_CELL_BITS,
     SCENE_CHUNKS,
     SLAB_GROUP_COST,
+    SLAB_PROBE_BACKOFF,
     SLAB_PROBE_INTERVAL,
     SLAB_TEST_COST,
     TESTS_PER_LAUNCH,
@@ -335,8 +336,7 @@ class SpatialHash:
         self.face_end = wp.empty(max(1, m), dtype=wp.int64, device=dev)
         self.grid_max = wp.zeros(4, dtype=wp.int32, device=dev)
         self.info = wp.zeros(kernels.INFO_SIZE, dtype=wp.int64, device=dev)
-        # The group slab test's policy, kept across calls (SlabArgs.policy): the first call slab-tests.
-        self.slab_policy = wp.array([1, 0], dtype=wp.int32, device=dev)
+        self.slab_policy = wp.array([1, 0], dtype=wp.int32, device=dev)  # SlabArgs.policy: the first call tests
         self.counts = wp.zeros(2, dtype=wp.int64, device=dev)
         self.summary = wp.zeros(kernels.SUMMARY_SIZE, dtype=wp.float64, device=dev)
         self.own_node_id = wp.array(np.arange(m, dtype=np.int32), dtype=wp.int32, device=dev)
@@ -678,7 +678,7 @@ class SpatialHash:
             if slab.enabled:
                 wp.launch(row_kernels._update_slab_policy, dim=1,
                           inputs=[self.info, self.counts, self.pair_capacity, SLAB_TEST_COST, SLAB_GROUP_COST,
-                                  SLAB_PROBE_INTERVAL],
+                                  SLAB_PROBE_INTERVAL, SLAB_PROBE_BACKOFF],
                           outputs=[self.slab_policy], device=dev)
         wp.launch(kernels._gather_summary, dim=1, inputs=[self.info, self.grid, self.counts],
                   outputs=[self.summary], device=dev)

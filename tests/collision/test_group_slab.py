@@ -408,19 +408,57 @@ def test_slab_policy_keeps_the_test_where_it_pays() -> None:
 
 def test_slab_policy_drops_the_test_where_it_does_not_pay_and_probes_again() -> None:
     """Plates 0.0015 apart at half distance 0.005 (all six within the distance): no group pair separates, so
-    after the first call the test is off; the SLAB_PROBE_INTERVAL-th call after runs it again. The
-    pairs are the same on every call (nothing was separated)."""
-    from pscc.collision.spatial_hash_settings import SLAB_PROBE_INTERVAL
+    after the first call the test is off; the SLAB_PROBE_INTERVAL-th call after runs it again, and each probe
+    that finds it still does not pay doubles the interval, SLAB_PROBE_BACKOFF times at most. The pairs are
+    the same on every call (nothing was separated)."""
+    from pscc.collision.spatial_hash_settings import SLAB_PROBE_BACKOFF, SLAB_PROBE_INTERVAL
 
+    intervals = [SLAB_PROBE_INTERVAL << min(k, SLAB_PROBE_BACKOFF) for k in range(SLAB_PROBE_BACKOFF + 2)]
     x, faces, node = _tilted_plates(0.0015)
-    calls = _policy_calls(x, faces, node, 0.005, SLAB_PROBE_INTERVAL + 3)
+    calls = _policy_calls(x, faces, node, 0.005, 1 + sum(n + 1 for n in intervals) + 1)
     tests = [t for t, _ in calls]
-    assert tests[0] > 0
-    assert tests[1:SLAB_PROBE_INTERVAL + 1] == [0] * SLAB_PROBE_INTERVAL
-    assert tests[SLAB_PROBE_INTERVAL + 1] > 0  # the probe
-    assert tests[SLAB_PROBE_INTERVAL + 2] == 0
+    probes = [k for k, t in enumerate(tests) if t > 0]
+    expected = [0]
+    for n in intervals:
+        expected.append(expected[-1] + n + 1)
+    assert probes == expected  # the first call, then probes 8, 16, 32, 64, 64 calls apart
     assert len({pairs for _, pairs in calls}) == 1
     assert len(calls[0][1]) > 0
+
+
+def test_slab_policy_backoff_restarts_when_the_test_pays() -> None:
+    """A probe that finds the test paying keeps it on; when it stops paying again the next probe comes
+    after SLAB_PROBE_INTERVAL calls, not after the interval the earlier probes had reached."""
+    from pscc.collision.spatial_hash_settings import SLAB_PROBE_INTERVAL
+
+    near, faces, node = _tilted_plates(0.0015)
+    # Pairs of plates 0.0015 apart, the pairs 0.04 apart: the slab test separates the pairs, rows stay.
+    apart = near.reshape(6, -1, 3).copy()
+    normal = np.array([0.0, -np.sqrt(0.5), np.sqrt(0.5)], dtype=np.float32)
+    for k in range(6):
+        apart[k] += (k // 2) * 0.04 * normal
+    apart = apart.reshape(-1, 3)
+    device = "cpu"
+    hash_ = SpatialHash(faces.shape[0], device, faces=wp.array(faces, dtype=wp.vec3i, device=device),
+                        group_slab_test=True, slab_min_work=4)
+
+    def call(x: np.ndarray) -> int:
+        lower, upper = _boxes(faces, x, None, 0.005)
+        hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device=device),
+                         wp.array(upper, dtype=wp.vec3, device=device),
+                         wp.array(node, dtype=wp.int32, device=device), 0.25,
+                         positions_t0=wp.array(x, dtype=wp.vec3, device=device), half_distance=0.005)
+        return int(hash_.stats.slab_tests)
+
+    first = [call(near) for _ in range(1 + 2 * SLAB_PROBE_INTERVAL + 3)]  # on, off, probe, off at level 1
+    assert [k for k, t in enumerate(first) if t > 0] == [0, SLAB_PROBE_INTERVAL + 1]
+    assert hash_.slab_policy.numpy()[0] == -1
+    hash_.slab_policy.assign(np.array([1, 1], dtype=np.int32))  # the level-1 probe comes now ...
+    assert call(apart) > 0  # ... and finds the test paying: level 0, on
+    assert hash_.slab_policy.numpy().tolist() == [1, 0]
+    assert call(near) > 0 and hash_.slab_policy.numpy()[0] == 0  # not paying any more: off at level 0
+    tests = [call(near) for _ in range(SLAB_PROBE_INTERVAL + 1)]
+    assert tests[:-1] == [0] * SLAB_PROBE_INTERVAL and tests[-1] > 0  # the probe after 8 calls, not 16
 
 
 def test_slab_policy_is_not_stepped_by_a_call_that_overflowed() -> None:
