@@ -499,8 +499,8 @@ class CollisionDetector:
         spare (:func:`~pscc.collision.spatial_hash_settings.fitted_capacities`), for a caller about to record
         the call into a graph: a replay sorts, pads and scans these tables whole, and a detector starts
         with 4 entry slots and 1 group slot per face whatever the mesh needs. The work rows and the pair
-        buffer keep their size: their use swings from call to call with the same positions (the group
-        slab test's periodic probe doubles the rows of `cloth_rollers f3` every ninth call). Call it after
+        buffer keep their size: their use swings from call to call with the same positions (a call that
+        probes the group slab test doubles the rows of `cloth_rollers f3`). Call it after
         a call that :meth:`check_capacity` accepted; it reads that call's counters (a sync point).
 
         Returns:
