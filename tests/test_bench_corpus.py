@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,11 @@ def test_frames_round_trip_through_the_cache(tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.rest, frame.rest)
     assert loaded.object_ids is None and loaded.radius == pytest.approx(frame.radius)
     assert frame.without_rest().rest is None
+    # A cached frame is a check frame when its spec says so (the flag is not stored in the file).
+    spec = corpus.FrameSpec("usd", "frame.usd", check=True)
+    frame.save(tmp_path / spec.cache_name)
+    assert corpus.load_frame(spec, "cpu", tmp_path).check
+    assert not corpus.load_frame(replace(spec, check=False), "cpu", tmp_path).check
 
 
 def test_half_median_edge_ignores_a_few_long_edges() -> None:
@@ -95,6 +101,24 @@ def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
     for row in rows.values():
         # The recorded graph replays the detection: the same rows as the host call, every time.
         assert row["graph_matches"] and row["graph_seconds"] > 0
+
+
+def test_check_frames_are_marked_and_tallied_apart() -> None:
+    frame = replace(_twisted_frame(1000), check=True)
+    checked = corpus_bench.bench_frame(frame, "cpu", repeats=1, with_newton=False, with_ipctk=False)
+    assert checked["check"] is True
+    tuned = {**checked, "frame": "tuned", "check": False}
+    results = {"frames": [tuned, checked], "skipped": [], "repeats": 1, "seconds": 1.0, "corpus_seconds": 0.0}
+    text = "\n".join(corpus_bench.report(results))
+    pairs = checked["ratios"]["pscc"]["pairs_vs_spatial_hash"]
+    met = int(pairs <= corpus_bench.TARGETS["pairs_rest"])
+    # Each tally counts one frame with rest coordinates: the tuned frame's and the check frame's apart.
+    assert f"Targets met: pairs with rest <= 0.4: {met} of 1;" in text
+    assert f"(marked *check* below): pairs with rest <= 0.4: {met} of 1;" in text
+    assert "- `twisted` *check*: generated;" in text and "- `tuned`: generated;" in text
+    # A corpus with no check frame has no second tally.
+    alone = "\n".join(corpus_bench.report({**results, "frames": [tuned]}))
+    assert "marked *check*" not in alone
 
 
 def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
