@@ -101,6 +101,25 @@ def test_pscc_with_and_without_rest_against_spatial_hash() -> None:
     for row in rows.values():
         # The recorded graph replays the detection: the same rows as the host call, every time.
         assert row["graph_matches"] and row["graph_seconds"] > 0
+    # pscc's broad phase alone is timed too (the product ipctk's row times); plain hashing's is not.
+    assert rows["pscc"]["broad_seconds"] > 0 and rows["pscc-no-rest"]["broad_seconds"] > 0
+    assert "broad_seconds" not in rows["spatial-hash"]
+
+
+def test_broad_phase_replay_gives_the_candidates_of_the_call() -> None:
+    frame = _twisted_frame(1500)
+    runner = corpus_bench._PsccRunner(frame, "pscc", frame.rest, "cpu")
+    result = runner.run()
+    runner.record()
+    runner.record_broad()
+    runner.detector.candidates.counts.zero_()
+    runner.replay_broad()
+    counts = runner.detector.candidates.counts.numpy()
+    assert int(counts[0]) + int(counts[1]) == result.stats["candidate_pairs"] > 0
+    runner.replay()  # the full graph still gives the call's rows after the broad one ran
+    found = runner.replayed()
+    np.testing.assert_array_equal(found.vertex_face, result.vertex_face)
+    np.testing.assert_array_equal(found.edge_edge, result.edge_edge)
 
 
 def test_check_frames_are_marked_and_tallied_apart() -> None:
@@ -147,6 +166,7 @@ def test_quick_corpus_case_end_to_end(tmp_path: Path) -> None:
     for key in ("time_vs_newton", "time_vs_newton-rebuild", "time_vs_ipctk-lbvh-1", "time_vs_ipctk-lbvh-2",
                 "host_vs_newton"):
         assert entry["ratios"]["pscc-no-rest"][key] > 0
+    assert entry["ratios"]["pscc-no-rest"]["broad_vs_ipctk-lbvh-1"] > 0
     # Every pair pscc reports is an ipctk candidate: the two radius conventions agree.
     frame = corpus.CorpusFrame.load(tmp_path / SHIRT.cache_name)
     runner = corpus_bench.IpctkLbvh(frame, 1)

@@ -101,6 +101,24 @@ class _PsccRunner:
         self.contacts = recorded.contacts
         self.graph = recorded.graph
 
+    def record_broad(self) -> None:
+        """Record the device-array broad phase alone (:meth:`CollisionDetector.broad_phase_device`: BV tests,
+        feature pairs and their boxes; the candidate rows stay on the device, no distance test) into a
+        second graph: the same product as ipctk's ``Candidates.build``. Call after :meth:`record` (whose
+        fitted buffers it shares)."""
+        detector = self.detector
+        detector.broad_phase(self.positions, thickness=self.frame.radius)  # grows what it needs, checks
+        with wp.ScopedCapture(device=detector.device) as capture:
+            detector.broad_phase_device(self.positions, thickness=self.frame.radius)
+        self.broad_graph = capture.graph
+
+    def replay_broad(self) -> None:
+        """One replay of the broad-phase graph, then its counter read (as :meth:`replay`)."""
+        wp.capture_launch(self.broad_graph)
+        if not self.detector.check_capacity():
+            raise RuntimeError(f"{self.frame.name}: a buffer overflowed in a broad-phase replay of unchanged "
+                               "positions")
+
     def replay(self) -> None:
         """One replay of the recorded graph, then the counter read a caller needs to trust it
         (:meth:`CollisionDetector.check_capacity`, the device path's one sync point)."""
@@ -224,11 +242,13 @@ def _runners(frame: CorpusFrame, device: str, with_newton: bool, with_ipctk: boo
     return runners, missing
 
 
-def _alternate(runners: dict[str, Any], repeats: int) -> tuple[dict[str, list[float]], dict[str, Any]]:
+def _alternate(runners: dict[str, Any], repeats: int,
+               broad: tuple[str, ...] = ()) -> tuple[dict[str, list[float]], dict[str, Any]]:
     """Time every runner once per repeat, rotating the order each repeat (after one warm-up call each).
 
     A runner with a ``record`` method (the Warp detectors) is recorded into a graph after its warm-up,
-    and its replay is timed as one more entry of the rotation, under ``"<name> graph"``.
+    and its replay is timed as one more entry of the rotation, under ``"<name> graph"``; the runners named
+    in ``broad`` also record their broad phase alone, timed under ``"<name> broad"``.
 
     Returns the seconds of each repeat per timed entry, and each runner's last ``run()`` result.
     """
@@ -240,6 +260,10 @@ def _alternate(runners: dict[str, Any], repeats: int) -> tuple[dict[str, list[fl
             runner.record()
             runner.replay()
             timed[f"{name} graph"] = runner.replay
+            if name in broad:
+                runner.record_broad()
+                runner.replay_broad()
+                timed[f"{name} broad"] = runner.replay_broad
     names = list(timed)
     seconds: dict[str, list[float]] = {name: [] for name in names}
     for k in range(repeats):
@@ -296,12 +320,14 @@ def bench_frame(frame: CorpusFrame, device: str, repeats: int, with_newton: bool
         ratios.
     """
     runners, missing = _runners(frame, device, with_newton, with_ipctk)
-    seconds, results = _alternate(runners, repeats)
+    seconds, results = _alternate(runners, repeats, broad=("pscc", "pscc-no-rest"))
     rows = []
     for name, runner in runners.items():
         row = {"method": name, "seconds": statistics.median(seconds[name]), **runner.row(results[name])}
         if f"{name} graph" in seconds:
             row["graph_seconds"] = statistics.median(seconds[f"{name} graph"])
+        if f"{name} broad" in seconds:
+            row["broad_seconds"] = statistics.median(seconds[f"{name} broad"])
         if isinstance(runner, _PsccRunner):
             runner.replay()  # the last timed call may have been the host call, which shares the buffers
             row["graph_matches"] = _same_rows(runner.replayed(), results[name])
@@ -327,6 +353,9 @@ def bench_frame(frame: CorpusFrame, device: str, repeats: int, with_newton: bool
                 a / b for a, b in zip(seconds[f"{name} graph"], _best_seconds(seconds, other), strict=True))
             entry[f"host_vs_{other}"] = statistics.median(
                 a / b for a, b in zip(seconds[name], seconds[other], strict=True))
+            if other.startswith("ipctk"):
+                entry[f"broad_vs_{other}"] = statistics.median(
+                    a / b for a, b in zip(seconds[f"{name} broad"], seconds[other], strict=True))
         ratios[name] = entry
     return {"frame": frame.name, "source": frame.source, "faces": frame.face_count, "radius": frame.radius,
             "rest": frame.rest is not None, "check": frame.check, "missing": missing, "rows": rows, "ratios": ratios}
@@ -391,14 +420,16 @@ def report(results: dict[str, Any]) -> list[str]:
         "`graph s`: the device-array detection recorded once and replayed, as pscc's simulator runs it (pscc:",
         "`RecordedDetection`, the hash's tables fitted to the call before recording; Newton: `wp.ScopedCapture`),",
         "plus pscc's one counter read (`check_capacity`) or Newton's sync. Every pscc",
-        "replay gave the host call's rows (checked on every frame).",
+        "replay gave the host call's rows (checked on every frame). `broad s`: pscc's broad phase alone",
+        "(`broad_phase_device`: BV tests, then feature pairs whose boxes overlap; candidate rows, no distance",
+        "test), recorded and replayed on its own with its counter read: the product ipctk's row times.",
         "pscc tests face pairs with 26-DOPs (the box and ten diagonal slabs, `pscc/geometry/dop.py`);",
         "`spatial-hash` is the paper's plain hashing (boxes only), and `spatial-hash (26-DOP)` the same hash",
         "with pscc's face test, to show which part of pscc's culling the normal cones do.",
         "",
         "| frame | faces | method | BV tests | triangle pairs | candidates | VF | EE | call s | graph s "
-        "| bytes/tri |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| broad s | bytes/tri |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for entry in results["frames"]:
         for r in entry["rows"]:
@@ -412,7 +443,7 @@ def report(results: dict[str, Any]) -> list[str]:
                 graph += " (**rows differ**)"
             cells = [entry["frame"], f"{entry['faces']:,}", label, _count(r.get("bv_tests")),
                      _count(r.get("triangle_pairs")), _count(r.get("candidate_pairs")), _count(vf), _count(ee),
-                     f"{r['seconds']:.4f}", graph,
+                     f"{r['seconds']:.4f}", graph, f"{r['broad_seconds']:.4f}" if "broad_seconds" in r else "",
                      f"{r['bytes_per_triangle']:.0f}" if "bytes_per_triangle" in r else ""]
             lines.append("| " + " | ".join(cells) + " |")
     lines += [
@@ -422,7 +453,9 @@ def report(results: dict[str, Any]) -> list[str]:
         "detector: rebuild and both queries; also shown against the faster refit), at most ipctk's",
         "LBVH on one thread, at most spatial-hash's. `time` ratios: pscc's graph replay over the other",
         "method's faster of call and replay (ipctk: its call); `host` ratios: pscc's host call over the other's",
-        "call. `found`: pscc's colliding pairs (VF + EE) over spatial-hash's, which are brute force's. In DCD",
+        "call; `broad` the same for pscc's broad phase alone (not a target: ipctk's row has no distance",
+        "tests, pscc's DCD time does). `found`: pscc's colliding pairs (VF + EE) over spatial-hash's, which",
+        "are brute force's. In DCD",
         "pscc returns a subset (checked): features of one front node, or of two neighbouring faces certified",
         "to meet only in what they share, closer than the radius are culled, because the certificates are",
         "about intersection, not distance (`docs/pscc.md`; on the shirt, whose radius is half its median",
@@ -430,8 +463,8 @@ def report(results: dict[str, Any]) -> list[str]:
         "",
         "| frame | pscc | pairs / spatial-hash | pairs / spatial-hash (26-DOP) | found | time / spatial-hash "
         "| time / newton rebuild | time / newton refit | host / newton refit | time / ipctk 1 thread "
-        "| host / ipctk 1 thread | time / ipctk 2 threads |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| host / ipctk 1 thread | broad / ipctk 1 thread | time / ipctk 2 threads |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     tallies = {False: {key: [0, 0] for key in TARGETS}, True: {key: [0, 0] for key in TARGETS}}
     for entry in results["frames"]:
@@ -456,6 +489,7 @@ def report(results: dict[str, Any]) -> list[str]:
                     _tally(met, target, q[f"time_vs_{key}"])
                 else:
                     cells += ["", ""]
+            cells.append(f"{q['broad_vs_ipctk-lbvh-1']:.2f}" if "broad_vs_ipctk-lbvh-1" in q else "")
             cells.append(f"{q['time_vs_ipctk-lbvh-2']:.2f}" if "time_vs_ipctk-lbvh-2" in q else "")
             lines.append("| " + " | ".join(cells) + " |")
     names = {"pairs_rest": "pairs with rest <= 0.4", "pairs_no_rest": "pairs without rest <= 0.6",
