@@ -104,10 +104,10 @@ class _PsccRunner:
     def record_broad(self) -> None:
         """Record the device-array broad phase alone (:meth:`CollisionDetector.broad_phase_device`: BV tests,
         feature pairs and their boxes; the candidate rows stay on the device, no distance test) into a
-        second graph: the same product as ipctk's ``Candidates.build``. Call after :meth:`record` (whose
-        fitted buffers it shares)."""
+        second graph: the same product as ipctk's ``Candidates.build``. Call right after :meth:`record`:
+        the broad phase runs in the buffers that call sized and fitted, with no eager call that could grow
+        one (a growth would leave the full graph writing into released buffers)."""
         detector = self.detector
-        detector.broad_phase(self.positions, thickness=self.frame.radius)  # grows what it needs, checks
         with wp.ScopedCapture(device=detector.device) as capture:
             detector.broad_phase_device(self.positions, thickness=self.frame.radius)
         self.broad_graph = capture.graph
