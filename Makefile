@@ -4,6 +4,8 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# Test processes for pytest (pytest-xdist): one per CPU by default; PYTEST_WORKERS=0 runs them in one process.
+PYTEST_WORKERS ?= auto
 
 .PHONY: demo test lint pytest cuda-compile bench clean
 
@@ -22,7 +24,7 @@ lint: $(STAMP)
 	$(PY) -m ruff check pscc tests tools
 
 pytest: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS)
 
 cuda-compile: $(STAMP)
 	$(PY) tools/compile_cuda.py --arch 80 90

@@ -4,17 +4,23 @@ Imports every module of the package, finds those that define ``@wp.kernel`` func
 ``wp.compile_aot_module`` for each requested architecture. A kernel that does not compile for CUDA
 makes this script exit with status 1, so ``make test`` fails.
 
-Usage: python tools/compile_cuda.py --arch 80 90 [--out DIR]
+The modules are compiled in ``--jobs`` worker processes (default: one per CPU), each importing pscc and
+Warp afresh; NVRTC compiles on the CPU, so two cores halve the wait.
+
+Usage: python tools/compile_cuda.py --arch 80 90 [--out DIR] [--jobs N]
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import multiprocessing
+import os
 import pkgutil
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 import warp as wp
 
@@ -34,28 +40,53 @@ def kernel_modules() -> list[str]:
     return sorted(names)
 
 
+def _start_worker() -> None:
+    """Worker set-up: Warp's log quiet, Warp initialised once per process."""
+    wp.config.log_level = wp.LOG_WARNING
+    wp.init()
+
+
+def compile_module(name: str, arch: list[int], out: str) -> tuple[str, str, float]:
+    """Compile one kernel module for ``arch`` into ``out``.
+
+    Returns:
+        ``(name, result, seconds)``: ``result`` is the compiled architectures ("sm80, sm90"), or
+        ``"FAILED: <error>"`` when the module does not compile.
+    """
+    started = time.perf_counter()
+    try:
+        paths = wp.compile_aot_module(importlib.import_module(name).__name__, arch=arch, module_dir=out)
+    except Exception as exc:  # report every failing module, then fail
+        return name, f"FAILED: {type(exc).__name__}: {exc}", time.perf_counter() - started
+    return name, ", ".join(p.suffixes[-2].lstrip(".") for p in paths), time.perf_counter() - started
+
+
 def main(argv: list[str] | None = None) -> int:
     """Compile each kernel module for each architecture; return the process exit status."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arch", type=int, nargs="+", default=[80, 90], help="SM architectures, e.g. 80 90")
     parser.add_argument("--out", default=None, help="directory for the cubins (default: a temporary one)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="worker processes (default: one per CPU)")
     args = parser.parse_args(argv)
-    wp.config.log_level = wp.LOG_WARNING
-    wp.init()
+    if args.jobs < 1:
+        parser.error(f"--jobs must be at least 1, got {args.jobs}")
+    _start_worker()
     names = kernel_modules()
     failures = 0
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or scratch
-        for name in names:
-            started = time.perf_counter()
-            try:
-                paths = wp.compile_aot_module(name, arch=args.arch, module_dir=out)
-            except Exception as exc:  # report every failing module, then fail
-                failures += 1
-                print(f"FAILED  {name}: {type(exc).__name__}: {exc}", file=sys.stderr)
-                continue
-            arches = ", ".join(p.suffixes[-2].lstrip(".") for p in paths)
-            print(f"ok      {name} -> {arches} ({time.perf_counter() - started:.1f} s)")
+        # Spawned workers: a fork would copy this process's initialised Warp runtime.
+        with ProcessPoolExecutor(max_workers=min(args.jobs, len(names)), initializer=_start_worker,
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+            jobs = [pool.submit(compile_module, name, args.arch, out) for name in names]
+            for job in jobs:  # in module order, as each finishes
+                name, result, seconds = job.result()
+                if result.startswith("FAILED"):
+                    failures += 1
+                    print(f"FAILED  {name}: {result[len('FAILED: '):]}", file=sys.stderr)
+                else:
+                    print(f"ok      {name} -> {result} ({seconds:.1f} s)", flush=True)
     print(f"CUDA ahead-of-time compile: {len(names) - failures} of {len(names)} kernel modules compiled "
           f"for sm_{', sm_'.join(str(a) for a in args.arch)}")
     return 1 if failures else 0
