@@ -46,19 +46,28 @@ def _start_worker() -> None:
     wp.init()
 
 
-def compile_module(name: str, arch: list[int], out: str) -> tuple[str, str, float]:
-    """Compile one kernel module for ``arch`` into ``out``.
+def compile_module(name: str, arch: list[int], out: str) -> tuple[str, str | None, float]:
+    """Compile one kernel module for ``arch`` into ``out`` (importing it first, so that its kernels are
+    registered in this process).
 
     Returns:
-        ``(name, result, seconds)``: ``result`` is the compiled architectures ("sm80, sm90"), or
-        ``"FAILED: <error>"`` when the module does not compile.
+        ``(arches, error, seconds)``: the compiled architectures ("sm80, sm90") and ``None``, or ``""``
+        and the error when the module does not compile.
     """
     started = time.perf_counter()
+    importlib.import_module(name)
     try:
-        paths = wp.compile_aot_module(importlib.import_module(name).__name__, arch=arch, module_dir=out)
+        paths = wp.compile_aot_module(name, arch=arch, module_dir=out)
     except Exception as exc:  # report every failing module, then fail
-        return name, f"FAILED: {type(exc).__name__}: {exc}", time.perf_counter() - started
-    return name, ", ".join(p.suffixes[-2].lstrip(".") for p in paths), time.perf_counter() - started
+        return "", f"{type(exc).__name__}: {exc}", time.perf_counter() - started
+    return ", ".join(p.suffixes[-2].lstrip(".") for p in paths), None, time.perf_counter() - started
+
+
+def _cpu_count() -> int:
+    """The CPUs this process may run on (the affinity mask where the platform has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -66,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arch", type=int, nargs="+", default=[80, 90], help="SM architectures, e.g. 80 90")
     parser.add_argument("--out", default=None, help="directory for the cubins (default: a temporary one)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+    parser.add_argument("--jobs", type=int, default=_cpu_count(),
                         help="worker processes (default: one per CPU)")
     args = parser.parse_args(argv)
     if args.jobs < 1:
@@ -77,16 +86,16 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or scratch
         # Spawned workers: a fork would copy this process's initialised Warp runtime.
-        with ProcessPoolExecutor(max_workers=min(args.jobs, len(names)), initializer=_start_worker,
+        with ProcessPoolExecutor(max_workers=max(1, min(args.jobs, len(names))), initializer=_start_worker,
                                  mp_context=multiprocessing.get_context("spawn")) as pool:
-            jobs = [pool.submit(compile_module, name, args.arch, out) for name in names]
-            for job in jobs:  # in module order, as each finishes
-                name, result, seconds = job.result()
-                if result.startswith("FAILED"):
+            jobs = {name: pool.submit(compile_module, name, args.arch, out) for name in names}
+            for name, job in jobs.items():  # in module order
+                arches, error, seconds = job.result()
+                if error is not None:
                     failures += 1
-                    print(f"FAILED  {name}: {result[len('FAILED: '):]}", file=sys.stderr)
+                    print(f"FAILED  {name}: {error}", file=sys.stderr)
                 else:
-                    print(f"ok      {name} -> {result} ({seconds:.1f} s)", flush=True)
+                    print(f"ok      {name} -> {arches} ({seconds:.1f} s)", flush=True)
     print(f"CUDA ahead-of-time compile: {len(names) - failures} of {len(names)} kernel modules compiled "
           f"for sm_{', sm_'.join(str(a) for a in args.arch)}")
     return 1 if failures else 0

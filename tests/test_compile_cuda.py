@@ -1,0 +1,44 @@
+"""`tools/compile_cuda.py`, the ahead-of-time CUDA compile of `make test`: a module that compiles is
+reported with its architectures, one that does not gives its error, and the script fails on it."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+# The script lives in tools/, not in a package: importable by name (also in the script's spawned workers,
+# which inherit this sys.path).
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+import compile_cuda  # noqa: E402
+
+
+def test_a_small_module_compiles_for_both_architectures(tmp_path: Path) -> None:
+    arches, error, seconds = compile_cuda.compile_module("pscc.sim.pcg", [80, 90], str(tmp_path))
+    assert error is None
+    assert arches == "sm80, sm90"
+    assert seconds > 0.0
+
+
+def test_an_architecture_nvrtc_refuses_is_an_error(tmp_path: Path) -> None:
+    arches, error, _ = compile_cuda.compile_module("pscc.sim.pcg", [5], str(tmp_path))
+    assert arches == ""
+    assert error is not None and "failed" in error
+
+
+def test_the_script_fails_on_a_module_that_does_not_compile(monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture) -> None:
+    monkeypatch.setattr(compile_cuda, "kernel_modules", lambda: ["pscc.sim.pcg"])
+    # The module list is patched in this process only; the one spawned worker compiles pscc.sim.pcg for an
+    # architecture NVRTC refuses.
+    assert compile_cuda.main(["--arch", "5", "--jobs", "1"]) == 1
+    captured = capsys.readouterr()
+    assert "FAILED  pscc.sim.pcg" in captured.err
+    assert "0 of 1 kernel modules compiled" in captured.out
+
+
+def test_jobs_below_one_are_refused() -> None:
+    with pytest.raises(SystemExit) as exc:
+        compile_cuda.main(["--jobs", "0"])
+    assert exc.value.code == 2
