@@ -27,24 +27,41 @@ class _Result:
     stats = {"seconds": {"setup": 0.0, "spatial_hash": 0.001, "output": 0.001, "total": 0.002}}
 
 
-def test_paired_medians_alternate_and_ratio_each_pair() -> None:
+class _Clock:
+    """A stand-in for ``time``: ``perf_counter`` reads a time that only the calls below advance."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+def test_paired_medians_alternate_and_ratio_each_pair(monkeypatch) -> None:
+    clock = _Clock()
+    monkeypatch.setattr(broad_phase, "time", clock)
     order = []
+    # Per call (warm-up first): run takes 10, 30, 20, 10 ms, other 40, 40, 80, 40 ms.
+    run_ms = iter([10, 30, 20, 10])
+    other_ms = iter([40, 40, 80, 40])
 
     def run():
         order.append("a")
-        time.sleep(0.01)
+        clock.now += next(run_ms) / 1000
         return _Result()
 
     def other():
         order.append("b")
-        time.sleep(0.04)
+        clock.now += next(other_ms) / 1000
 
     seconds, result, other_seconds, ratio, device_ratio = broad_phase._paired_medians(run, other, 3)
     assert order == ["a", "b"] * 4
     assert isinstance(result, _Result)
-    assert 0.01 <= seconds < other_seconds
-    assert 0.1 < ratio < 0.6  # 10 ms against 40 ms, with sleep jitter
-    assert abs(device_ratio - 0.001 / other_seconds) < 0.01
+    assert abs(seconds - 0.020) < 1e-12 and abs(other_seconds - 0.040) < 1e-12
+    # Per-repeat ratios 0.75, 0.25, 0.25: the median of the ratios, not the ratio of the medians (0.5).
+    assert abs(ratio - 0.25) < 1e-12
+    # Device seconds of run (_Result: its 1 ms spatial hash) over other's: 0.025, 0.0125, 0.025.
+    assert abs(device_ratio - 0.025) < 1e-12
 
 
 def test_bench_methods_and_report_on_a_small_scene() -> None:

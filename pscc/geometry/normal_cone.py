@@ -52,13 +52,6 @@ def sample_directions(count: int = DIRECTION_COUNT) -> np.ndarray:
 
 
 @wp.func
-def full_mask() -> mask_type:
-    """The mask with every direction set."""
-    f = wp.uint32(0xFFFFFFFF)
-    return mask_type(f, f, f, f)
-
-
-@wp.func
 def mask_and(a: mask_type, b: mask_type) -> mask_type:
     """Directions in both masks."""
     return mask_type(a[0] & b[0], a[1] & b[1], a[2] & b[2], a[3] & b[3])

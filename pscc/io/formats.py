@@ -617,11 +617,6 @@ class UsdAnimationWriter:
         self._obstacles = self._mesh(OBSTACLES_PRIM) if self._obstacle_faces.size else None
 
     @property
-    def has_obstacles(self) -> bool:
-        """Whether the stage has an ``/World/Obstacles`` mesh."""
-        return self._obstacle_faces.size > 0
-
-    @property
     def frames(self) -> tuple[int, ...]:
         """Frame indices (time codes) the stage holds now, kept from a resumed file or added, ascending."""
         return tuple(sorted(self._times))

@@ -39,13 +39,6 @@ DEFAULT_FRAMES: dict[str, int] = {"drape": 45, "stack": 45, "twist": 60, "sphere
 """Frames of a run when ``--frames`` is not given."""
 
 
-def default_triangles(name: str) -> int:
-    """Cloth triangles of a built-in scene at scale 1 (paper scenes: the paper's count)."""
-    if name in paper.PAPER_TRIANGLES:
-        return paper.PAPER_TRIANGLES[name]
-    return builtin.DEFAULT_TRIANGLES[name]
-
-
 def build(name: str, *, triangles: int | None = None, scale: float | None = None) -> Scene:
     """Build a built-in scene by triangle count or scale (at most one of them).
 

@@ -79,13 +79,3 @@ class ClothState:
         """A deep copy on the same device. Allocates: yes. Capture-safe: no."""
         return ClothState(wp.clone(self.positions), wp.clone(self.velocities))
 
-    def copy_from(self, other: ClothState) -> None:
-        """Copy ``other``'s positions and velocities into this state's arrays.
-
-        Allocates: no. Capture-safe: yes.
-        """
-        if other.positions.shape != self.positions.shape:
-            raise InputError("argument", "other", f"has {other.vertex_count} vertices, this state {self.vertex_count}",
-                             "copy between states of the same model")
-        wp.copy(self.positions, other.positions)
-        wp.copy(self.velocities, other.velocities)
