@@ -46,7 +46,7 @@ def test_half_median_edge_ignores_a_few_long_edges() -> None:
 
 
 def test_fan_triangles_split_polygons() -> None:
-    faces = corpus._fan_triangles(np.array([3, 4]), np.array([0, 1, 2, 3, 4, 5, 6]))
+    faces = corpus.fan_triangles(np.array([3, 4]), np.array([0, 1, 2, 3, 4, 5, 6]))
     np.testing.assert_array_equal(faces, [[0, 1, 2], [3, 4, 5], [3, 5, 6]])
 
 

@@ -19,6 +19,10 @@ Sections:
 8. The device path: host reads, syncs and uploads per frame, graph replay against eager launches and
    memory per triangle (:mod:`pscc.bench.device_path`).
 
+``--frames FILE ...`` instead benches your own frames (OBJ, PLY, NPZ or USD files exported by any system)
+side by side as the corpus of section 4 (:mod:`pscc.bench.user_frames`), and writes only that section
+(to ``bench-output/frames.md`` unless ``--out`` says otherwise).
+
 Timings are the median of repeats after a warm-up run that compiles and loads the kernels.
 """
 
@@ -26,8 +30,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -36,13 +42,18 @@ import numpy as np
 import warp as wp
 from tqdm import tqdm
 
-from pscc.bench import broad_phase, corpus, corpus_bench, device_path, garments, simulator
+from pscc._atomic import write_json_atomic, write_text_atomic
+from pscc.bench import broad_phase, corpus, corpus_bench, device_path, garments, simulator, user_frames
 from pscc.bench import scenes as paper_scenes
 from pscc.bench.ccd_queries import load_query_sets
 from pscc.collision.detector import CollisionDetector
+from pscc.errors import InputError, PsccError, one_line
 from pscc.geometry.ccd import edge_edge_ccd, vertex_face_ccd
 from pscc.mesh.generate import folded_sheet
 from pscc.scenes.paper import PAPER_SCENES
+
+DEFAULT_FRAMES_REPORT: str = "bench-output/frames.md"
+"""Where ``--frames`` writes its report when ``--out`` is not given (never over ``BENCHMARKS.md``)."""
 
 
 def _median_seconds(run: Any, repeats: int) -> float:
@@ -241,7 +252,8 @@ def _detector_lines(results: dict[str, Any], out: Path) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     """Run every benchmark and write the report; return the exit status."""
     parser = argparse.ArgumentParser(description="Run the pscc benchmarks and write BENCHMARKS.md.")
-    parser.add_argument("--out", default="BENCHMARKS.md", help="report path (default BENCHMARKS.md)")
+    parser.add_argument("--out", default=None,
+                        help=f"report path (default BENCHMARKS.md; with --frames {DEFAULT_FRAMES_REPORT})")
     parser.add_argument("--device", default=None, help="Warp device (default: Warp's default)")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 4000, 16000],
@@ -284,17 +296,19 @@ def main(argv: list[str] | None = None) -> int:
                         "skip")
     parser.add_argument("--only-simulator", action="store_true",
                         help="run only the simulator sections (5 and 6); the report then holds only them")
+    parser.add_argument("--frames", nargs="+", default=None, metavar="FILE",
+                        help="bench only these frames (" + ", ".join(user_frames.FRAME_EXTENSIONS) + "), side by "
+                        "side as the corpus: pscc with and without rest coordinates, spatial hashing, Newton and "
+                        "ipctk, with issue 14's targets; the report then holds only them")
+    parser.add_argument("--frame-radius", type=float, default=None,
+                        help="with --frames: the DCD contact radius (default: half each frame's median edge)")
     args = parser.parse_args(argv)
+    if args.frames is not None:
+        return _bench_frames(args)
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
     device = wp.get_device(args.device)
-    results: dict[str, Any] = {
-        "environment": {
-            "date": time.strftime("%Y-%m-%d"), "device": device.alias, "processor": platform.processor()
-            or platform.machine(), "cpu_count": __import__("os").cpu_count(), "warp": wp.__version__,
-            "python": platform.python_version(), "repeats": args.repeats,
-        },
-    }
+    results: dict[str, Any] = {"environment": _environment(device, args.repeats)}
     if not args.only_simulator:
         results["query_sets"] = bench_query_sets(device.alias, args.repeats)
         results["random_queries"] = bench_random_queries(device.alias, 100_000, args.repeats)
@@ -335,12 +349,52 @@ def main(argv: list[str] | None = None) -> int:
         cases = garments.QUICK_CASES if args.garments == "quick" else garments.CASES
         with tqdm(desc="garments", unit="frame", leave=False) as bar:
             results["garments"] = garments.run(cases, device.alias, _progress(bar))
-    out = Path(args.out)
+    out = Path(args.out or "BENCHMARKS.md")
     out.with_suffix(".json").write_text(json.dumps(results, indent=2))
     write_report(results, out)
     print(f"wrote {out} and {out.with_suffix('.json')}")
     return 0
 
+
+def _environment(device: Any, repeats: int) -> dict[str, Any]:
+    return {"date": time.strftime("%Y-%m-%d"), "device": device.alias,
+            "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+            "warp": wp.__version__, "python": platform.python_version(), "repeats": repeats}
+
+
+def _bench_frames(args: argparse.Namespace) -> int:
+    """``--frames``: read every file first (a bad file or output path ends the run with exit 2 before anything
+    is measured or written), bench them as the corpus, and write only that section."""
+    out = Path(args.out or DEFAULT_FRAMES_REPORT)
+    try:
+        if out.is_dir() or out.suffix.lower() != ".md":
+            raise InputError(str(out), "--out", "is a folder" if out.is_dir() else "the report must be a .md file",
+                             "name a Markdown file, e.g. --out frames.md")
+        frames = user_frames.load_user_frames(args.frames, args.frame_radius)
+    except PsccError as exc:
+        print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    wp.config.log_level = wp.LOG_WARNING
+    wp.init()
+    device = wp.get_device(args.device)
+    repeats = max(args.repeats, corpus_bench.CORPUS_REPEATS)
+    results: dict[str, Any] = {"environment": _environment(device, repeats)}
+    with tqdm(total=len(frames), desc="your frames", unit="frame", leave=False) as bar:
+        results["corpus"] = corpus_bench.run_frames(frames, device.alias, repeats, with_newton=not args.no_newton,
+                                                    progress=_progress(bar))
+    env = results["environment"]
+    lines = ["# Benchmarks on your frames", "",
+             f"Written by `python -m pscc.bench --frames` on {env['date']}. Device: **{env['device']}** "
+             f"({env['processor']}, {env['cpu_count']} cores), Warp {env['warp']}, Python {env['python']}. "
+             f"Raw numbers: `{out.with_suffix('.json').name}`.", ""]
+    try:
+        write_json_atomic(out.with_suffix(".json"), results, field="--out")
+        write_text_atomic(out, "\n".join(lines + corpus_bench.report(results["corpus"])), field="--out")
+    except PsccError as exc:
+        print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} and {out.with_suffix('.json')}")
+    return 0
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -39,8 +39,8 @@ import warp as wp
 
 __all__ = [
     "CACHE_VERSION", "DEFAULT_CACHE_DIR", "FULL_CORPUS", "QUICK_CORPUS", "SKIPPED_EXAMPLES", "CorpusFrame",
-    "FrameSpec", "NEWTON_CONTACT_MARGINS", "half_mean_edge", "half_median_edge", "load_corpus", "load_frame",
-    "own_contact_radius",
+    "FrameSpec", "NEWTON_CONTACT_MARGINS", "fan_triangles", "half_mean_edge", "half_median_edge", "load_corpus",
+    "load_frame", "own_contact_radius",
 ]
 
 CACHE_VERSION: int = 1
@@ -293,12 +293,12 @@ def _usd_frame(spec: FrameSpec) -> CorpusFrame:
     positions = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float32)
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), dtype=np.int64)
     indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int32)
-    faces = _fan_triangles(counts, indices)
+    faces = fan_triangles(counts, indices)
     source = f"Newton's shipped `{spec.name}` (mesh `{mesh.GetPath()}`), as shipped"
     return CorpusFrame(Path(spec.name).stem, source, positions, faces, None, None, half_median_edge(positions, faces))
 
 
-def _fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+def fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Triangles of USD polygons (fan from each polygon's first corner)."""
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     if np.all(counts == 3):

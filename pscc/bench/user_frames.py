@@ -1,0 +1,174 @@
+"""Your own frames in the corpus comparison (``python -m pscc.bench --frames FILE ...``).
+
+The corpus section (:mod:`pscc.bench.corpus_bench`) measures frames that we chose. This module reads frames
+that a user brings, exported by any system, into the same :class:`~pscc.bench.corpus.CorpusFrame`, so
+that they are benched side by side with the same methods, rows and targets:
+
+* ``.obj``, ``.ply``, ``.npz`` (keys ``vertices`` and ``faces``): read by :func:`pscc.mesh.load_mesh`, with
+  its checks and messages. Object ids come from the file (OBJ ``o``/``g`` groups, a PLY face property,
+  the NPZ key). Rest coordinates: the NPZ's ``rest``, else the file's texture coordinates when there is
+  one (u, v) per vertex (OBJ ``vt``, PLY ``s, t``, NPZ ``uv``): the flat pattern of a garment exported
+  with its UV layout. Without either the frame is benched without rest coordinates only.
+* ``.npz`` with a ``positions`` key: a cached corpus frame (:meth:`CorpusFrame.save`).
+* ``.usd``, ``.usda``, ``.usdc``, ``.usdz``: every ``UsdGeom.Mesh`` of the stage, one object each, its
+  points at the default time when authored, else at their first time sample (:data:`USD_TIME_NOTE`),
+  moved by the prim's local-to-world transform and fan-triangulated; no rest coordinates.
+
+The contact radius is ``radius`` when given, else half the frame's median edge length
+(:func:`pscc.bench.corpus.half_median_edge`), as for the shipped meshes of the corpus. Every problem
+raises :class:`~pscc.errors.InputError` naming the file, the field and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from pscc.bench.corpus import CorpusFrame, fan_triangles, half_median_edge
+from pscc.errors import InputError
+from pscc.mesh.io import load_mesh
+from pscc.mesh.mesh_data import validate_mesh
+
+__all__ = ["FRAME_EXTENSIONS", "USD_EXTENSIONS", "USD_TIME_NOTE", "load_user_frame", "load_user_frames"]
+
+USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
+"""Extensions read as USD stages."""
+
+FRAME_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz", *USD_EXTENSIONS)
+"""Every extension :func:`load_user_frame` reads (case-insensitive)."""
+
+USD_TIME_NOTE: str = "the default time when its points have a default value, else their first time sample"
+"""Which time of a USD stage is benched."""
+
+
+def load_user_frame(path: str | os.PathLike[str], radius: float | None = None) -> CorpusFrame:
+    """Read one frame from a mesh file (module docstring).
+
+    Args:
+        path: the file.
+        radius: the DCD contact radius (length units of the file); None: half the median edge length.
+
+    Returns:
+        The frame, named after the file; its ``source`` says what was read and which radius is used.
+
+    Raises:
+        InputError: the file is missing, unreadable, of another format, or not a valid triangle mesh; or
+            ``radius`` is not a positive finite number.
+    """
+    file = Path(path)
+    if radius is not None and not (math.isfinite(radius) and radius > 0.0):
+        raise InputError("argument", "--frame-radius", f"is {radius!r}", "give a positive contact radius")
+    extension = file.suffix.lower()
+    if extension not in FRAME_EXTENSIONS:
+        raise InputError(str(file), "extension", f"{file.suffix or 'no extension'} is not a frame format",
+                         f"export the frame as one of {', '.join(FRAME_EXTENSIONS)}")
+    if not file.is_file():
+        raise InputError(str(file), "file", "does not exist or is not a file", "check the path")
+    if extension in USD_EXTENSIONS:
+        frame = _usd_frame(file)
+    elif extension == ".npz" and _is_corpus_npz(file):
+        frame = _corpus_npz_frame(file)
+    else:
+        frame = _mesh_frame(file)
+    if radius is None:
+        return CorpusFrame(frame.name, f"{frame.source}; contact radius: half its median edge length",
+                           frame.positions, frame.faces, frame.rest, frame.object_ids, frame.radius)
+    return CorpusFrame(frame.name, f"{frame.source}; contact radius: {radius:g} (given)", frame.positions,
+                       frame.faces, frame.rest, frame.object_ids, float(radius))
+
+
+def load_user_frames(paths: list[str], radius: float | None = None) -> list[CorpusFrame]:
+    """:func:`load_user_frame` for every path, all read before any is benched (a bad file stops the run
+    before it starts). Frames whose file names repeat get the parent folder in their name."""
+    frames = [load_user_frame(p, radius) for p in paths]
+    names = [f.name for f in frames]
+    out = []
+    for path, frame in zip(paths, frames, strict=True):
+        if names.count(frame.name) > 1:
+            name = f"{Path(path).parent.name}/{frame.name}"
+            frame = CorpusFrame(name, frame.source, frame.positions, frame.faces, frame.rest, frame.object_ids,
+                                frame.radius)
+        out.append(frame)
+    return out
+
+
+def _mesh_frame(file: Path) -> CorpusFrame:
+    mesh = load_mesh(file)
+    rest, what = mesh.rest, "its rest coordinates"
+    if rest is None and mesh.uv is not None:
+        rest, what = mesh.uv, "its texture coordinates as rest coordinates"
+    elif rest is None:
+        what = "no rest coordinates" + (f" ({mesh.uv_issue})" if mesh.uv_issue else "")
+    ids = mesh.object_ids if np.any(mesh.object_ids != mesh.object_ids[0]) else None
+    source = f"`{file.name}` ({mesh.vertices.shape[0]:,} vertices), {what}"
+    return CorpusFrame(file.stem, source, mesh.vertices, mesh.faces, rest, ids,
+                       half_median_edge(mesh.vertices, mesh.faces))
+
+
+def _is_corpus_npz(file: Path) -> bool:
+    try:
+        with np.load(file) as data:
+            return "positions" in data.files
+    except (OSError, ValueError) as exc:
+        raise InputError(str(file), "file", f"cannot be read as NPZ ({exc})", "write it with numpy.savez") from exc
+
+
+def _corpus_npz_frame(file: Path) -> CorpusFrame:
+    try:
+        frame = CorpusFrame.load(file)
+    except KeyError as exc:
+        raise InputError(str(file), str(exc.args[0]), "is missing from this corpus frame",
+                         "write it with CorpusFrame.save, or give keys vertices and faces") from exc
+    mesh = validate_mesh(frame.positions, frame.faces, source=str(file), rest=frame.rest,
+                         object_ids=frame.object_ids)
+    return CorpusFrame(file.stem, f"corpus frame `{file.name}` ({frame.name}: {frame.source})", mesh.vertices,
+                       mesh.faces, mesh.rest, frame.object_ids, frame.radius)
+
+
+def _usd_frame(file: Path) -> CorpusFrame:
+    from pxr import Usd, UsdGeom
+
+    source = str(file)
+    stage = Usd.Stage.Open(source)
+    if stage is None:
+        raise InputError(source, "file", "cannot be opened as a USD stage", "export the frame as USD")
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if not meshes:
+        raise InputError(source, "file", "holds no UsdGeom.Mesh", "export the cloth as a polygon mesh")
+    cache = UsdGeom.XformCache()
+    blocks, face_blocks, ids = [], [], []
+    offset = 0
+    for k, prim in enumerate(meshes):
+        mesh = UsdGeom.Mesh(prim)
+        points = mesh.GetPointsAttr()
+        time = Usd.TimeCode.Default()
+        if points.Get(time) is None and points.GetNumTimeSamples() > 0:
+            time = Usd.TimeCode(points.GetTimeSamples()[0])
+        values = points.Get(time)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
+        if values is None or counts.size == 0:
+            raise InputError(source, str(prim.GetPath()), "has no points or no faces", "export the mesh's points "
+                             "and faces, or leave the prim out")
+        if np.any(counts < 3) or counts.sum() != indices.size:
+            raise InputError(source, f"{prim.GetPath()}.faceVertexCounts", "does not match faceVertexIndices "
+                             "(or a face has fewer than 3 corners)", "re-export the mesh")
+        local = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        cache.SetTime(time)
+        matrix = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64).reshape(4, 4)
+        blocks.append(local @ matrix[:3, :3] + matrix[3, :3])  # USD matrices act on row vectors
+        faces = fan_triangles(counts, indices)
+        face_blocks.append(faces + offset)
+        ids.append(np.full(faces.shape[0], k, dtype=np.int32))
+        offset += local.shape[0]
+    positions = np.concatenate(blocks).astype(np.float32)
+    mesh_data = validate_mesh(positions, np.concatenate(face_blocks), source=source,
+                              object_ids=np.concatenate(ids))
+    names = ", ".join(f"`{p.GetPath()}`" for p in meshes[:4]) + (" ..." if len(meshes) > 4 else "")
+    what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {USD_TIME_NOTE}"
+    return CorpusFrame(file.stem, f"`{file.name}`: {what}", mesh_data.vertices, mesh_data.faces, None,
+                       mesh_data.object_ids if len(meshes) > 1 else None,
+                       half_median_edge(mesh_data.vertices, mesh_data.faces))
