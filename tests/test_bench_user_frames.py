@@ -90,6 +90,10 @@ def test_usd_meshes_merge_as_objects_in_world_coordinates(tmp_path: Path) -> Non
     np.testing.assert_allclose(frame.positions[4:], [[0, 0, 2], [1, 0, 2], [0, 1, 2]])
     assert frame.object_ids.tolist() == [0, 0, 1] and frame.rest is None
     assert "2 meshes" in frame.source
+    later = user_frames.load_user_frame(path, usd_time=2.0)
+    np.testing.assert_allclose(later.positions[4:], [[5, 5, 7], [6, 5, 7], [5, 6, 7]])
+    with pytest.raises(InputError, match="--usd-time 9"):
+        user_frames.load_user_frame(path, usd_time=9.0)
 
 
 @pytest.mark.parametrize("case", ["missing", "extension", "radius", "not npz", "no mesh", "bad faces"])

@@ -302,6 +302,9 @@ def main(argv: list[str] | None = None) -> int:
                         "ipctk, with issue 14's targets; the report then holds only them")
     parser.add_argument("--frame-radius", type=float, default=None,
                         help="with --frames: the DCD contact radius (default: half each frame's median edge)")
+    parser.add_argument("--usd-time", type=float, default=None,
+                        help="with --frames: the time code of the USD files' points to bench (default: the default "
+                        "time, else the first time sample)")
     args = parser.parse_args(argv)
     if args.frames is not None:
         return _bench_frames(args)
@@ -370,7 +373,7 @@ def _bench_frames(args: argparse.Namespace) -> int:
         if out.is_dir() or out.suffix.lower() != ".md":
             raise InputError(str(out), "--out", "is a folder" if out.is_dir() else "the report must be a .md file",
                              "name a Markdown file, e.g. --out frames.md")
-        frames = user_frames.load_user_frames(args.frames, args.frame_radius)
+        frames = user_frames.load_user_frames(args.frames, args.frame_radius, args.usd_time)
     except PsccError as exc:
         print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
         return 2

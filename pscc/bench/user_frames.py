@@ -11,8 +11,9 @@ that they are benched side by side with the same methods, rows and targets:
   with its UV layout. Without either the frame is benched without rest coordinates only.
 * ``.npz`` with a ``positions`` key: a cached corpus frame (:meth:`CorpusFrame.save`).
 * ``.usd``, ``.usda``, ``.usdc``, ``.usdz``: every ``UsdGeom.Mesh`` of the stage, one object each, its
-  points at the default time when authored, else at their first time sample (:data:`USD_TIME_NOTE`),
-  moved by the prim's local-to-world transform and fan-triangulated; no rest coordinates.
+  points at the time code ``usd_time`` when given (an animation: the frame to bench), else at the default
+  time when authored, else at their first time sample (:data:`USD_TIME_NOTE`), moved by the prim's
+  local-to-world transform at that time and fan-triangulated; no rest coordinates.
 
 The contact radius is ``radius`` when given, else half the frame's median edge length
 (:func:`pscc.bench.corpus.half_median_edge`), as for the shipped meshes of the corpus. Every problem
@@ -44,12 +45,14 @@ USD_TIME_NOTE: str = "the default time when its points have a default value, els
 """Which time of a USD stage is benched."""
 
 
-def load_user_frame(path: str | os.PathLike[str], radius: float | None = None) -> CorpusFrame:
+def load_user_frame(path: str | os.PathLike[str], radius: float | None = None,
+                    usd_time: float | None = None) -> CorpusFrame:
     """Read one frame from a mesh file (module docstring).
 
     Args:
         path: the file.
         radius: the DCD contact radius (length units of the file); None: half the median edge length.
+        usd_time: USD only: the time code whose points are benched (None: :data:`USD_TIME_NOTE`).
 
     Returns:
         The frame, named after the file; its ``source`` says what was read and which radius is used.
@@ -68,7 +71,7 @@ def load_user_frame(path: str | os.PathLike[str], radius: float | None = None) -
     if not file.is_file():
         raise InputError(str(file), "file", "does not exist or is not a file", "check the path")
     if extension in USD_EXTENSIONS:
-        frame = _usd_frame(file)
+        frame = _usd_frame(file, usd_time)
     elif extension == ".npz" and _is_corpus_npz(file):
         frame = _corpus_npz_frame(file)
     else:
@@ -80,10 +83,10 @@ def load_user_frame(path: str | os.PathLike[str], radius: float | None = None) -
                        frame.faces, frame.rest, frame.object_ids, float(radius))
 
 
-def load_user_frames(paths: list[str], radius: float | None = None) -> list[CorpusFrame]:
+def load_user_frames(paths: list[str], radius: float | None = None, usd_time: float | None = None) -> list[CorpusFrame]:
     """:func:`load_user_frame` for every path, all read before any is benched (a bad file stops the run
     before it starts). Frames whose file names repeat get the parent folder in their name."""
-    frames = [load_user_frame(p, radius) for p in paths]
+    frames = [load_user_frame(p, radius, usd_time) for p in paths]
     names = [f.name for f in frames]
     out = []
     for path, frame in zip(paths, frames, strict=True):
@@ -128,7 +131,7 @@ def _corpus_npz_frame(file: Path) -> CorpusFrame:
                        mesh.faces, mesh.rest, frame.object_ids, frame.radius)
 
 
-def _usd_frame(file: Path) -> CorpusFrame:
+def _usd_frame(file: Path, usd_time: float | None) -> CorpusFrame:
     from pxr import Usd, UsdGeom
 
     source = str(file)
@@ -144,9 +147,13 @@ def _usd_frame(file: Path) -> CorpusFrame:
     for k, prim in enumerate(meshes):
         mesh = UsdGeom.Mesh(prim)
         points = mesh.GetPointsAttr()
-        time = Usd.TimeCode.Default()
-        if points.Get(time) is None and points.GetNumTimeSamples() > 0:
+        time = Usd.TimeCode.Default() if usd_time is None else Usd.TimeCode(usd_time)
+        if usd_time is None and points.Get(time) is None and points.GetNumTimeSamples() > 0:
             time = Usd.TimeCode(points.GetTimeSamples()[0])
+        samples = points.GetTimeSamples()
+        if usd_time is not None and samples and not samples[0] <= usd_time <= samples[-1]:
+            raise InputError(source, f"{prim.GetPath()}.points", f"has time samples from {samples[0]:g} to "
+                             f"{samples[-1]:g}, not at --usd-time {usd_time:g}", "give a time code in that range")
         values = points.Get(time)
         counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
         indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
@@ -168,7 +175,8 @@ def _usd_frame(file: Path) -> CorpusFrame:
     mesh_data = validate_mesh(positions, np.concatenate(face_blocks), source=source,
                               object_ids=np.concatenate(ids))
     names = ", ".join(f"`{p.GetPath()}`" for p in meshes[:4]) + (" ..." if len(meshes) > 4 else "")
-    what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {USD_TIME_NOTE}"
+    when = USD_TIME_NOTE if usd_time is None else f"time code {usd_time:g}"
+    what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {when}"
     return CorpusFrame(file.stem, f"`{file.name}`: {what}", mesh_data.vertices, mesh_data.faces, None,
                        mesh_data.object_ids if len(meshes) > 1 else None,
                        half_median_edge(mesh_data.vertices, mesh_data.faces))
