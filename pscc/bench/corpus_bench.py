@@ -403,7 +403,8 @@ CORPUS_ABOUT: str = (
     "Newton's shipped `unisex_shirt.usd`; then, added as a check after those had been tuned on, later "
     "moments of the two twisting scenes (denser tangles) and Newton's shipped `bunny.usd` and `bear.usd` "
     "(closed surfaces). DCD at each frame's own contact radius: a paper scene's cloth thickness, a Newton "
-    "example's self-contact margin, half the median edge length for a shipped mesh (no radius of its own).")
+    "example's self-contact margin, half the median edge length for a shipped mesh (no radius of its own). "
+    "`python -m pscc.bench --frames FILE ...` benches frames of your own the same way (README).")
 """The paragraph that says which frames the corpus section holds."""
 
 USER_FRAMES_TITLE: str = "Broad phase on your frames: pscc, spatial hashing, Newton and ipctk"
