@@ -47,6 +47,12 @@ class CapacityError(PsccError, RuntimeError):
     """A device buffer could not be grown to the size a computation needs."""
 
 
+class StaleGraphError(PsccError, RuntimeError):
+    """A recorded graph was replayed after the buffers it writes had been replaced (a growth or a trim):
+    its results are not in the detector's buffers. Record the call again after every check that returns
+    False (:class:`pscc.collision.recorded.RecordedDetection` does)."""
+
+
 def one_line(error: BaseException) -> str:
     """An error's message and notes (:meth:`BaseException.add_note`) on one line, as sentences."""
     parts = [" ".join(part.split()) for part in (str(error) or type(error).__name__,

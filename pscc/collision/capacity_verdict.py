@@ -18,6 +18,9 @@ that give node ids or an order). So a 0 always means the host check would have f
 
 The capacities are launch arguments, so a recorded graph holds the capacities of its recording; like
 every buffer of the call, they change only in the host check, after which a graph is recorded again.
+The verdict's *generation* is a launch argument too: ``verdict[1]`` says which buffers the judged call
+wrote. The owner advances the generation whenever it replaces them (:meth:`CapacityVerdict.advance`), so a
+graph recorded before and replayed after says so (:meth:`CapacityVerdict.stale`) instead of passing.
 A simulator's device step (:mod:`pscc.sim.device_step`) gathers the same counters into its own report
 and never reads the verdict: there the verdict is one one-thread launch and one 4-byte asynchronous copy
 per broad phase, read by nobody.
@@ -25,9 +28,10 @@ per broad phase, read by nobody.
 ========================  ===================  ==============================================
 buffer                    shape, dtype         meaning
 ========================  ===================  ==============================================
-verdict                   (1,) int32           0: the last broad phase fits; else a bit per
-                                               kind of counter that needs the host check
-host_verdict              (1,) int32, host     its copy, made by the call
+verdict                   (2,) int32           [0: the last broad phase fits, else a bit per
+                                               kind of counter that needs the host check;
+                                               the generation the call was launched with]
+host_verdict              (2,) int32, host     its copy, made by the call
 ========================  ===================  ==============================================
 """
 
@@ -91,10 +95,12 @@ def _judge_capacity(
     candidate_counts: wp.array(dtype=wp.int32),
     capacity_vertex_face: wp.int64,
     capacity_edge_edge: wp.int64,
+    generation: wp.int32,
     # out:
     verdict: wp.array(dtype=wp.int32),
 ):
-    """One thread: the verdict bits of the last broad phase (module docstring)."""
+    """One thread: the verdict bits of the last broad phase and the generation of its buffers (module
+    docstring)."""
     bits = int(0)
     if limits.enabled != 0:
         if info[_ENTRIES] > limits.entries or info[_WANTED_CELLS] > wp.int64(0):
@@ -114,6 +120,7 @@ def _judge_capacity(
             or edge_edge < wp.int64(0)):
         bits = bits | CANDIDATES_BIT
     verdict[0] = bits
+    verdict[1] = generation
 
 
 class CapacityVerdict:
@@ -125,16 +132,18 @@ class CapacityVerdict:
 
     def __init__(self, device: Any) -> None:
         self.device = device
-        self.verdict = wp.ones(1, dtype=wp.int32, device=device)
-        """(1,) int32: 0 when the last judged call fits (1 until a call is judged)."""
+        self.verdict = wp.ones(2, dtype=wp.int32, device=device)
+        """(2,) int32: [0 when the last judged call fits (1 until a call is judged), its generation]."""
         # The call copies its verdict to host memory (page-locked on a GPU); the check waits for the
         # device and reads it there through a view made once.
-        self.host_verdict = wp.ones(1, dtype=wp.int32, device="cpu", pinned=wp.get_device(device).is_cuda)
-        """(1,) int32 host copy of :attr:`verdict`, written by the call (capturable)."""
+        self.host_verdict = wp.ones(2, dtype=wp.int32, device="cpu", pinned=wp.get_device(device).is_cuda)
+        """(2,) int32 host copy of :attr:`verdict`, written by the call (capturable)."""
         self._host_view = self.host_verdict.numpy()
         # Stands in for the hash's counters when there is no hash (never read then).
         self._no_counters = wp.zeros(1, dtype=wp.int64, device=device)
         self._judged = False
+        self.generation = 0
+        """The generation of the owner's buffers: a call judged now writes it into ``verdict[1]``."""
 
     @property
     def device_bytes(self) -> int:
@@ -161,7 +170,7 @@ class CapacityVerdict:
             info, pair_counts = spatial_hash.info, spatial_hash.counts
         wp.launch(_judge_capacity, dim=1,
                   inputs=[info, pair_counts, limits, candidates.counts, wp.int64(candidates.capacity_vf),
-                          wp.int64(candidates.capacity_ee)],
+                          wp.int64(candidates.capacity_ee), self.generation],
                   outputs=[self.verdict], device=self.device)
         wp.copy(self.host_verdict, self.verdict)
         self._judged = True
@@ -176,4 +185,19 @@ class CapacityVerdict:
         if not self._judged:
             return False
         wp.synchronize_device(self.device)
-        return int(self._host_view[0]) == 0
+        return int(self._host_view[0]) == 0 and int(self._host_view[1]) == self.generation
+
+    def stale(self) -> bool:
+        """After :meth:`fits`: whether the last judged call was launched with buffers that the owner has
+        replaced since (a graph recorded before an :meth:`advance`, replayed after it).
+
+        Allocates: no. Capture-safe: no.
+        """
+        return self._judged and int(self._host_view[1]) != self.generation
+
+    def advance(self) -> None:
+        """Start a new generation: the owner is replacing buffers that calls judged so far wrote.
+
+        Allocates: no. Capture-safe: no (a host counter, read by the next :meth:`judge`).
+        """
+        self.generation += 1

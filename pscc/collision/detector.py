@@ -40,7 +40,7 @@ from pscc.collision.narrow_phase import NarrowPhase
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.collision.spatial_hash_settings import SLAB_PROBE_BACKOFF, fitted_capacities
-from pscc.errors import InputError
+from pscc.errors import InputError, StaleGraphError
 from pscc.mesh.mesh_data import validate_mesh
 from pscc.mesh.topology import MeshTopology
 
@@ -82,6 +82,28 @@ class CollisionResult:
     edge_edge_toi: np.ndarray | None = None
     stats: dict[str, Any] = field(default_factory=dict)
 
+
+
+def held_arrays(owners: list[Any]) -> list[Any]:
+    """The ``wp.array`` and Warp struct values that ``owners`` and the pscc objects they hold (attributes,
+    lists, tuples, dicts) refer to now: a list that keeps that memory alive however the owners replace it."""
+    held: list[Any] = []
+    seen: set[int] = set()
+    stack = list(owners)
+    while stack:
+        value = stack.pop()
+        if id(value) in seen:
+            continue
+        seen.add(id(value))
+        if isinstance(value, wp.array) or type(value).__name__ == "StructInstance":
+            held.append(value)
+        elif isinstance(value, list | tuple):
+            stack.extend(value)
+        elif isinstance(value, dict):
+            stack.extend(value.values())
+        elif type(value).__module__.startswith("pscc.") and hasattr(value, "__dict__"):
+            stack.extend(vars(value).values())
+    return held
 
 class CollisionDetector:
     """Collision detection for a triangle mesh with fixed topology (one or several objects).
@@ -177,6 +199,7 @@ class CollisionDetector:
                              "pass True, False or None (on for pscc only)")
         self._face_diagonals = (method == "pscc") if face_diagonals is None else bool(face_diagonals)
         self._lent_scratch: wp.array | None = None
+        self._retired: list[Any] = []  # buffers the last growth or trim replaced, kept for a stale replay
         self._lend_pair_buffers = False
         self._vertex_count: int | None = None
         self._broad_mode: str | None = None
@@ -475,24 +498,50 @@ class CollisionDetector:
             InputError: a deferred input problem found on the device (boxes with NaN/Inf).
             CapacityError: more pairs than int32 buffers can hold.
 
+            StaleGraphError: the last call was a graph recorded before a growth or a trim replaced the
+                buffers it writes (its rows are not in this detector's buffers): record it again.
+
         Reads one device flag when the call fits (:mod:`pscc.collision.capacity_verdict`: the counters
         were compared on the device, and the stats read them only when asked); the counters otherwise.
+        The buffers a growth or trim replaces are kept until a call on the new ones fits, so a stale graph
+        replayed right after by mistake writes into them, not into released memory, before this check raises.
 
         Allocates: when a buffer grows. Capture-safe: no.
         """
         if self.verdict.fits():
+            self._retired = []  # a call of this generation ran: the caller has moved to the new buffers
             if self.method != "brute-force":
                 self.spatial_hash.accept_unread()
             self.candidates.accept_unread()
             self.narrow.reserve(self.candidates)
             return True
+        if self.verdict.stale():
+            raise StaleGraphError(
+                f"replayed a graph recorded with buffers of generation {int(self.verdict.host_verdict.numpy()[1])}; "
+                f"growths and trims have replaced them since (generation {self.verdict.generation}), so its rows are "
+                "not in the detector's buffers; record the call again after every check_capacity() that returns "
+                "False, or replay through pscc.collision.recorded.RecordedDetection, which does")
+        held = self._held_buffers()
         fits = True
         if self.method != "brute-force" and not self.spatial_hash.check_capacity():
             fits = False
         if not self.candidates.fits():
             fits = False
         self.narrow.reserve(self.candidates)
+        if not fits:
+            self._retire(held)
         return fits
+
+    def _held_buffers(self) -> list[Any]:
+        """Every device array (and struct of arrays) the detector's growable parts hold now."""
+        parts = [self.candidates, self.narrow] + ([] if self.method == "brute-force" else [self.spatial_hash])
+        return held_arrays(parts)
+
+    def _retire(self, held: list[Any]) -> None:
+        """Buffers were replaced: keep the ones held before (``held``) alive until a call on the new ones fits,
+        and start a new generation of the capacity verdict, which marks the graphs recorded before as stale."""
+        self._retired = held
+        self.verdict.advance()
 
     def fit_buffers(self) -> bool:
         """Shrink the spatial hash's entry, group and slab tables to what the last call used, with room to
@@ -518,7 +567,9 @@ class CollisionDetector:
         capacities = {k: c for k, c in self.spatial_hash.capacities().items() if k in FITTED_TABLES}
         targets = fitted_capacities(capacities, used)
         if targets:
+            held = self._held_buffers()
             self.spatial_hash.trim(targets)
+            self._retire(held)
         return bool(targets)
 
     def front_count(self) -> wp.array | None:

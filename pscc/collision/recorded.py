@@ -4,9 +4,10 @@ A :class:`~pscc.collision.detector.CollisionDetector` call on device arrays reco
 graph (``wp.ScopedCapture``). A replay reads nothing back; the caller's
 :meth:`~pscc.collision.detector.CollisionDetector.check_capacity` afterwards grows every buffer that
 overflowed and returns False. The graph still holds the buffers it was recorded with, which the growth
-released: replayed again it would write into released memory and leave the new buffers unread (on this
-project's CPU, a `cloth_rollers` frame replayed that way reported 0 triangle pairs and a capacity verdict
-that fits). So after a False the detection must run again and be recorded again.
+replaced: replayed again it would write into them and leave the new buffers unread (on this project's CPU, a
+`cloth_rollers` frame replayed that way once reported 0 triangle pairs and a capacity verdict that fits; the
+check now raises :class:`~pscc.errors.StaleGraphError` for it). So after a False the detection must run again
+and be recorded again.
 :class:`RecordedDetection` does both: :meth:`RecordedDetection.replay` launches the graph, checks, and
 on a False records a new graph and replays that, until the call fits. Before each recording it fits the
 spatial hash's tables to the call (``fit``, on by default): a detector starts with 4 entry slots per face,

@@ -10,7 +10,7 @@ import warp as wp
 
 from pscc.collision import capacity_verdict as cv
 from pscc.collision.detector import METHODS, CollisionDetector
-from pscc.errors import InputError
+from pscc.errors import InputError, StaleGraphError
 from pscc.mesh import folded_sheet
 
 
@@ -121,3 +121,51 @@ def test_a_replayed_call_that_outgrows_its_recording_is_caught() -> None:
     expected = CollisionDetector(mesh.faces, device="cpu").detect(squashed, None, 0.02)
     np.testing.assert_array_equal(result.edge_edge, expected.edge_edge)
     np.testing.assert_array_equal(result.vertex_face, expected.vertex_face)
+
+
+def _recorded(detector, x, thickness):
+    with wp.ScopedCapture(device="cpu") as capture:
+        contacts = detector.detect(x, None, thickness)
+    return capture.graph, contacts
+
+
+def test_a_graph_replayed_after_its_buffers_grew_is_refused_not_passed() -> None:
+    mesh = folded_sheet(600, layers=3, seed=3)
+    detector = CollisionDetector(mesh.faces, device="cpu")
+    x = wp.array(mesh.vertices, dtype=wp.vec3, device="cpu")
+    detector.detect(x, None, 0.02)
+    graph, _ = _recorded(detector, x, 0.02)
+    x.assign((mesh.vertices_end * np.array([1.0, 1.0, 0.02], np.float32)).astype(np.float32))
+    wp.capture_launch(graph)
+    generation = detector.verdict.generation
+    assert not detector.check_capacity()  # grew: a new generation, the old buffers kept
+    assert detector.verdict.generation == generation + 1 and detector._retired
+    # Replayed again as it is (the caller ignored the False): it writes into the kept buffers, and the check
+    # says so instead of accepting rows that are not in the detector's buffers.
+    wp.capture_launch(graph)
+    with pytest.raises(StaleGraphError, match="record the call again"):
+        detector.check_capacity()
+    # A call on the new buffers fits (and releases the old ones); a graph recorded now replays and passes.
+    rows = detector.collect(detector.detect(x, None, 0.02))
+    assert not detector._retired
+    fresh, contacts = _recorded(detector, x, 0.02)
+    wp.capture_launch(fresh)
+    assert detector.check_capacity()
+    again = detector.collect(contacts)
+    assert rows.edge_edge.shape[0] > 0
+    np.testing.assert_array_equal(again.edge_edge, rows.edge_edge)
+    np.testing.assert_array_equal(again.vertex_face, rows.vertex_face)
+
+
+def test_a_graph_recorded_before_a_trim_is_refused() -> None:
+    mesh = folded_sheet(6000, layers=3, seed=4)
+    detector = CollisionDetector(mesh.faces, method="pscc", rest=mesh.rest, device="cpu")
+    x = wp.array(mesh.vertices_end, dtype=wp.vec3, device="cpu")
+    detector.detect(x, None, 0.01)
+    graph, _ = _recorded(detector, x, 0.01)
+    wp.capture_launch(graph)
+    assert detector.check_capacity()
+    assert detector.fit_buffers()  # 4 entry slots per face shrink to what the call uses
+    wp.capture_launch(graph)
+    with pytest.raises(StaleGraphError):
+        detector.check_capacity()
