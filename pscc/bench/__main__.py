@@ -261,8 +261,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--broad-phase-sizes", type=int, nargs="*", default=[50000, 200000],
                         help="triangle counts for the broad-phase comparison (none to skip it)")
     parser.add_argument("--corpus", choices=("full", "quick", "skip"), default="full",
-                        help="broad phase on realistic frames (paper scenes, Newton's cloth examples, shirt, bunny "
-                        "and bear) against spatial hashing, Newton and ipctk: full (13 frames; about 17 min to "
+                        help="broad phase on realistic frames (paper scenes, Newton's cloth examples, shirt, bunny, "
+                        "bear and two CAD assemblies) against spatial hashing, Newton and ipctk: full (15 frames; "
+                        "about 17 min to "
                         "simulate them the first time, then cached, and about 2 min to measure on 2 CPU cores), "
                         "quick (3 early frames, under a minute) or skip")
     parser.add_argument("--corpus-cache", default=str(corpus.DEFAULT_CACHE_DIR),

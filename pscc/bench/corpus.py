@@ -39,8 +39,8 @@ import warp as wp
 
 __all__ = [
     "CACHE_VERSION", "DEFAULT_CACHE_DIR", "FULL_CORPUS", "QUICK_CORPUS", "SKIPPED_EXAMPLES", "CorpusFrame",
-    "FrameSpec", "NEWTON_CONTACT_MARGINS", "fan_triangles", "half_mean_edge", "half_median_edge", "load_corpus",
-    "load_frame", "own_contact_radius",
+    "FrameSpec", "NEWTON_CONTACT_MARGINS", "USD_TIME_NOTE", "fan_triangles", "half_mean_edge", "half_median_edge",
+    "load_corpus", "load_frame", "own_contact_radius", "read_usd_meshes",
 ]
 
 CACHE_VERSION: int = 1
@@ -204,8 +204,14 @@ FULL_CORPUS: tuple[FrameSpec, ...] = (
     FrameSpec("newton", "twist", 300, check=True),
     FrameSpec("usd", "bunny.usd", check=True),
     FrameSpec("usd", "bear.usd", check=True),
+    # Added later the same day (2026-11-29, evening), again as a check: Newton's two shipped CAD assemblies,
+    # several rigid parts each (one object per mesh), slivers and thin walls. At half their median edge they
+    # hold many true contacts (walls thinner than the radius, parts that touch): a dense-contact case that is
+    # not cloth.
+    FrameSpec("usd", "rj45_plug.usd", check=True),
+    FrameSpec("usd", "crazyflie.usd", check=True),
 )
-"""The ``--corpus full`` frames (about 17 minutes to simulate the first time on 2 CPU cores, most of it
+"""The ``--corpus full`` frames (15; about 17 minutes to simulate the first time on 2 CPU cores, most of it
 `cloth_twist` f180 and f300; then cached)."""
 
 QUICK_CORPUS: tuple[FrameSpec, ...] = (
@@ -278,24 +284,82 @@ def _newton_version() -> str:
     return str(getattr(newton, "__version__", "?"))
 
 
-def _usd_frame(spec: FrameSpec) -> CorpusFrame:
-    import newton.examples
+USD_TIME_NOTE: str = "the default time when its points have a default value, else their first time sample"
+"""Which time of a USD stage :func:`read_usd_meshes` reads when it is not given one."""
+
+
+def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, str]:
+    """Every ``UsdGeom.Mesh`` of a USD stage as one triangle mesh: each mesh's points at ``usd_time`` (None:
+    :data:`USD_TIME_NOTE`), moved by its local-to-world transform at that time, its polygons fan-triangulated
+    (:func:`fan_triangles`), one object id per mesh.
+
+    Returns:
+        ``(positions (n, 3) float32, faces (m, 3) int32, object_ids (m,) int32 or None for one mesh, what)``,
+        ``what`` saying in words which meshes and which time were read.
+
+    Raises:
+        InputError: the stage cannot be opened, holds no mesh, a mesh has no points or faces at that time or
+            inconsistent face arrays, ``usd_time`` is outside a mesh's time samples, or the result fails
+            :func:`pscc.mesh.mesh_data.validate_mesh`.
+    """
     from pxr import Usd, UsdGeom
 
-    path = newton.examples.get_asset(spec.name)
-    stage = Usd.Stage.Open(path)
+    from pscc.errors import InputError
+    from pscc.mesh.mesh_data import validate_mesh
+
+    source = str(path)
+    stage = Usd.Stage.Open(source)
     if stage is None:
-        raise RuntimeError(f"pxr could not open {path}")
-    meshes = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
-    if len(meshes) != 1:
-        raise RuntimeError(f"{path} holds {len(meshes)} meshes; the corpus expects one")
-    mesh = meshes[0]
-    positions = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float32)
-    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), dtype=np.int64)
-    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int32)
-    faces = fan_triangles(counts, indices)
-    source = f"Newton's shipped `{spec.name}` (mesh `{mesh.GetPath()}`), as shipped"
-    return CorpusFrame(Path(spec.name).stem, source, positions, faces, None, None, half_median_edge(positions, faces))
+        raise InputError(source, "file", "cannot be opened as a USD stage", "export the frame as USD")
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if not meshes:
+        raise InputError(source, "file", "holds no UsdGeom.Mesh", "export the cloth as a polygon mesh")
+    cache = UsdGeom.XformCache()
+    blocks, face_blocks, ids = [], [], []
+    offset = 0
+    for k, prim in enumerate(meshes):
+        mesh = UsdGeom.Mesh(prim)
+        points = mesh.GetPointsAttr()
+        time = Usd.TimeCode.Default() if usd_time is None else Usd.TimeCode(usd_time)
+        samples = points.GetTimeSamples()
+        if usd_time is None and points.Get(time) is None and samples:
+            time = Usd.TimeCode(samples[0])
+        if usd_time is not None and samples and not samples[0] <= usd_time <= samples[-1]:
+            raise InputError(source, f"{prim.GetPath()}.points", f"has time samples from {samples[0]:g} to "
+                             f"{samples[-1]:g}, not at --usd-time {usd_time:g}", "give a time code in that range")
+        values = points.Get(time)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
+        if values is None or counts.size == 0:
+            raise InputError(source, str(prim.GetPath()), "has no points or no faces", "export the mesh's points "
+                             "and faces, or leave the prim out")
+        if np.any(counts < 3) or counts.sum() != indices.size:
+            raise InputError(source, f"{prim.GetPath()}.faceVertexCounts", "does not match faceVertexIndices "
+                             "(or a face has fewer than 3 corners)", "re-export the mesh")
+        local = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        cache.SetTime(time)
+        matrix = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64).reshape(4, 4)
+        blocks.append(local @ matrix[:3, :3] + matrix[3, :3])  # USD matrices act on row vectors
+        faces = fan_triangles(counts, indices)
+        face_blocks.append(faces + offset)
+        ids.append(np.full(faces.shape[0], k, dtype=np.int32))
+        offset += local.shape[0]
+    mesh_data = validate_mesh(np.concatenate(blocks).astype(np.float32), np.concatenate(face_blocks), source=source,
+                              object_ids=np.concatenate(ids))
+    names = ", ".join(f"`{p.GetPath()}`" for p in meshes[:4]) + (" ..." if len(meshes) > 4 else "")
+    when = USD_TIME_NOTE if usd_time is None else f"time code {usd_time:g}"
+    what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {when}"
+    return (mesh_data.vertices, mesh_data.faces, mesh_data.object_ids if len(meshes) > 1 else None, what)
+
+
+def _usd_frame(spec: FrameSpec) -> CorpusFrame:
+    import newton.examples
+
+    path = Path(newton.examples.get_asset(spec.name))
+    positions, faces, object_ids, what = read_usd_meshes(path)
+    source = f"Newton's shipped `{spec.name}` ({what}), as shipped"
+    return CorpusFrame(Path(spec.name).stem, source, positions, faces, None, object_ids,
+                       half_median_edge(positions, faces))
 
 
 def fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:

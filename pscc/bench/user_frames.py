@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pscc.bench.corpus import CorpusFrame, fan_triangles, half_median_edge
+from pscc.bench.corpus import USD_TIME_NOTE, CorpusFrame, half_median_edge, read_usd_meshes
 from pscc.errors import InputError
 from pscc.mesh.io import load_mesh
 from pscc.mesh.mesh_data import validate_mesh
@@ -40,9 +40,6 @@ USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
 
 FRAME_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".npz", *USD_EXTENSIONS)
 """Every extension :func:`load_user_frame` reads (case-insensitive)."""
-
-USD_TIME_NOTE: str = "the default time when its points have a default value, else their first time sample"
-"""Which time of a USD stage is benched."""
 
 
 def load_user_frame(path: str | os.PathLike[str], radius: float | None = None,
@@ -132,51 +129,6 @@ def _corpus_npz_frame(file: Path) -> CorpusFrame:
 
 
 def _usd_frame(file: Path, usd_time: float | None) -> CorpusFrame:
-    from pxr import Usd, UsdGeom
-
-    source = str(file)
-    stage = Usd.Stage.Open(source)
-    if stage is None:
-        raise InputError(source, "file", "cannot be opened as a USD stage", "export the frame as USD")
-    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
-    if not meshes:
-        raise InputError(source, "file", "holds no UsdGeom.Mesh", "export the cloth as a polygon mesh")
-    cache = UsdGeom.XformCache()
-    blocks, face_blocks, ids = [], [], []
-    offset = 0
-    for k, prim in enumerate(meshes):
-        mesh = UsdGeom.Mesh(prim)
-        points = mesh.GetPointsAttr()
-        time = Usd.TimeCode.Default() if usd_time is None else Usd.TimeCode(usd_time)
-        if usd_time is None and points.Get(time) is None and points.GetNumTimeSamples() > 0:
-            time = Usd.TimeCode(points.GetTimeSamples()[0])
-        samples = points.GetTimeSamples()
-        if usd_time is not None and samples and not samples[0] <= usd_time <= samples[-1]:
-            raise InputError(source, f"{prim.GetPath()}.points", f"has time samples from {samples[0]:g} to "
-                             f"{samples[-1]:g}, not at --usd-time {usd_time:g}", "give a time code in that range")
-        values = points.Get(time)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
-        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
-        if values is None or counts.size == 0:
-            raise InputError(source, str(prim.GetPath()), "has no points or no faces", "export the mesh's points "
-                             "and faces, or leave the prim out")
-        if np.any(counts < 3) or counts.sum() != indices.size:
-            raise InputError(source, f"{prim.GetPath()}.faceVertexCounts", "does not match faceVertexIndices "
-                             "(or a face has fewer than 3 corners)", "re-export the mesh")
-        local = np.asarray(values, dtype=np.float64).reshape(-1, 3)
-        cache.SetTime(time)
-        matrix = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64).reshape(4, 4)
-        blocks.append(local @ matrix[:3, :3] + matrix[3, :3])  # USD matrices act on row vectors
-        faces = fan_triangles(counts, indices)
-        face_blocks.append(faces + offset)
-        ids.append(np.full(faces.shape[0], k, dtype=np.int32))
-        offset += local.shape[0]
-    positions = np.concatenate(blocks).astype(np.float32)
-    mesh_data = validate_mesh(positions, np.concatenate(face_blocks), source=source,
-                              object_ids=np.concatenate(ids))
-    names = ", ".join(f"`{p.GetPath()}`" for p in meshes[:4]) + (" ..." if len(meshes) > 4 else "")
-    when = USD_TIME_NOTE if usd_time is None else f"time code {usd_time:g}"
-    what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {when}"
-    return CorpusFrame(file.stem, f"`{file.name}`: {what}", mesh_data.vertices, mesh_data.faces, None,
-                       mesh_data.object_ids if len(meshes) > 1 else None,
-                       half_median_edge(mesh_data.vertices, mesh_data.faces))
+    positions, faces, object_ids, what = read_usd_meshes(file, usd_time)
+    return CorpusFrame(file.stem, f"`{file.name}`: {what}", positions, faces, None, object_ids,
+                       half_median_edge(positions, faces))
