@@ -148,6 +148,7 @@ def test_bench_frames_end_to_end(tmp_path: Path) -> None:
     text = out.read_text()
     assert f"## {corpus_bench.USER_FRAMES_TITLE}" in text and "| layers | 300 | pscc (rest) |" in text
     assert "| layers | pscc (no rest) |" in text and "Targets met:" in text and "0.01 (given)" in text
+    assert "](frames.png)" in text and out.with_suffix(".png").stat().st_size > 0  # the targets, drawn
     results = json.loads(out.with_suffix(".json").read_text())
     (entry,) = results["corpus"]["frames"]
     assert entry["radius"] == 0.01 and entry["rest"] is True

@@ -173,7 +173,10 @@ def write_report(results: dict[str, Any], out: Path) -> None:
     if results.get("broad_phase"):
         lines += broad_phase.report(results["broad_phase"])
     if results.get("corpus"):
-        lines += corpus_bench.report(results["corpus"])
+        path = out.parent / "docs" / "bench-corpus.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        drawn = corpus_bench.plot_corpus(results["corpus"], path)
+        lines += corpus_bench.report(results["corpus"], path.relative_to(out.parent).as_posix() if drawn else None)
     if results.get("simulator"):
         lines += simulator.report_comparison(results["simulator"])
     sections = (("simulator_stages", "bench-sim-stages.png", simulator.plot_breakdown, simulator.report_breakdown),
@@ -393,7 +396,10 @@ def _bench_frames(args: argparse.Namespace) -> int:
              f"Raw numbers: `{out.with_suffix('.json').name}`.", ""]
     try:
         write_json_atomic(out.with_suffix(".json"), results, field="--out")
-        write_text_atomic(out, "\n".join(lines + corpus_bench.report(results["corpus"])), field="--out")
+        picture = out.with_suffix(".png")
+        drawn = corpus_bench.plot_corpus(results["corpus"], picture)
+        report = corpus_bench.report(results["corpus"], picture.name if drawn else None)
+        write_text_atomic(out, "\n".join(lines + report), field="--out")
     except PsccError as exc:
         print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
         return 2

@@ -48,7 +48,8 @@ from pscc.collision.detector import CollisionDetector
 from pscc.collision.recorded import RecordedDetection
 
 __all__ = ["CORPUS_ABOUT", "CORPUS_REPEATS", "CORPUS_TITLE", "GROUND_FRAMES", "QUICK_REPEATS", "TARGETS",
-           "USER_FRAMES_ABOUT", "USER_FRAMES_TITLE", "IpctkLbvh", "bench_frame", "report", "run", "run_frames"]
+           "USER_FRAMES_ABOUT", "USER_FRAMES_TITLE", "IpctkLbvh", "bench_frame", "plot_corpus", "report", "run",
+           "run_frames"]
 
 CORPUS_REPEATS: int = 15
 """Repeats of each method per frame with ``--corpus full`` (after one warm-up call each)."""
@@ -433,9 +434,52 @@ def run_frames(frames: list[CorpusFrame], device: str, repeats: int, with_newton
             "seconds": time.perf_counter() - started, "title": USER_FRAMES_TITLE, "about": USER_FRAMES_ABOUT}
 
 
-def report(results: dict[str, Any]) -> list[str]:
+_PLOT_PANELS: tuple[tuple[str, str, str], ...] = (
+    ("pairs_vs_spatial_hash", "triangle pairs / spatial-hash", "pairs"),
+    ("time_vs_newton-rebuild", "time / Newton (rebuild)", "time_vs_newton"),
+    ("time_vs_ipctk-lbvh-1", "time / ipctk LBVH, 1 thread", "time_vs_ipctk_1"),
+)
+
+
+def plot_corpus(results: dict[str, Any], path: Path) -> bool:
+    """Three panels of horizontal bars, one bar per frame and pscc row (rest / no rest): triangle pairs over
+    spatial hashing's, DCD time over Newton's rebuild and over ipctk's one thread, each against its target
+    line (green: met, red: not). Check frames are marked ``*``. False without matplotlib or frames."""
+    from pscc.bench.simulator import pyplot
+
+    plt = pyplot()
+    entries = [(e, name, q) for e in results["frames"] for name, q in e["ratios"].items()]
+    if plt is None or not entries:
+        return False
+    labels = [f"{'* ' if e.get('check') else ''}{e['frame']} ({'rest' if name == 'pscc' else 'no rest'})"
+              for e, name, _ in entries]
+    y = np.arange(len(entries))[::-1]
+    fig, axes = plt.subplots(1, len(_PLOT_PANELS), figsize=(11.0, 1.2 + 0.22 * len(entries)), sharey=True)
+    for ax, (key, title, target_key) in zip(axes, _PLOT_PANELS, strict=True):
+        values, targets = [], []
+        for _, name, q in entries:
+            values.append(q.get(key, np.nan))
+            targets.append(TARGETS[("pairs_rest" if name == "pscc" else "pairs_no_rest")] if target_key == "pairs"
+                           else TARGETS[target_key])
+        colours = ["#2e7d32" if v <= t else "#c62828" for v, t in zip(values, targets, strict=True)]
+        ax.barh(y, values, color=colours, height=0.7)
+        for yy, t in zip(y, targets, strict=True):
+            ax.plot([t, t], [yy - 0.45, yy + 0.45], color="black", linewidth=1.0)
+        ax.set_title(title, fontsize=9)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.grid(axis="x", alpha=0.3)
+    axes[0].set_yticks(y, labels, fontsize=7)
+    fig.suptitle("pscc against its targets (black ticks; green met, red not; * check frames)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+def report(results: dict[str, Any], plot: str | None = None) -> list[str]:
     """Markdown lines for BENCHMARKS.md (the corpus section, or the ``--frames`` section when ``results``
-    carries a ``title`` and an ``about`` paragraph)."""
+    carries a ``title`` and an ``about`` paragraph); ``plot``: the path of :func:`plot_corpus`'s picture,
+    relative to the report, shown under the ratio table."""
     lines = [
         f"## {results.get('title', CORPUS_TITLE)}",
         "",
@@ -527,6 +571,8 @@ def report(results: dict[str, Any]) -> list[str]:
             cells.append(f"{q['broad_vs_ipctk-lbvh-1']:.2f}" if "broad_vs_ipctk-lbvh-1" in q else "")
             cells.append(f"{q['time_vs_ipctk-lbvh-2']:.2f}" if "time_vs_ipctk-lbvh-2" in q else "")
             lines.append("| " + " | ".join(cells) + " |")
+    if plot is not None:
+        lines += ["", f"![pscc against issue 14's targets, frame by frame]({plot})"]
     names = {"pairs_rest": "pairs with rest <= 0.4", "pairs_no_rest": "pairs without rest <= 0.6",
              "time_vs_newton": "time <= 1/3 of Newton (rebuild, the issue's detector)",
              "time_vs_newton_refit": "time <= 1/3 of Newton refit (not the issue's target; stricter)",
