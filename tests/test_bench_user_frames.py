@@ -96,7 +96,7 @@ def test_usd_meshes_merge_as_objects_in_world_coordinates(tmp_path: Path) -> Non
         user_frames.load_user_frame(path, usd_time=9.0)
 
 
-@pytest.mark.parametrize("case", ["missing", "extension", "radius", "not npz", "no mesh", "bad faces"])
+@pytest.mark.parametrize("case", ["missing", "extension", "radius", "not npz", "no mesh", "bad faces", "not usd"])
 def test_bad_input_names_the_file_and_the_fix(tmp_path: Path, case: str) -> None:
     path, radius = tmp_path / "frame.obj", None
     if case == "extension":
@@ -117,6 +117,9 @@ def test_bad_input_names_the_file_and_the_fix(tmp_path: Path, case: str) -> None
         stage = Usd.Stage.CreateNew(str(path))
         UsdGeom.Xform.Define(stage, "/World")
         stage.GetRootLayer().Save()
+    elif case == "not usd":
+        path = tmp_path / "broken.usda"
+        path.write_text("#usda 1.0\n{{{ not a layer")
     elif case == "bad faces":
         path = tmp_path / "frame.npz"
         np.savez(path, vertices=np.zeros((3, 3), np.float32), faces=np.array([[0, 1, 5]]))
