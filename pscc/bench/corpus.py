@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import importlib
 import math
-import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -306,18 +305,11 @@ def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarr
     from pxr import Usd, UsdGeom
 
     from pscc.errors import InputError
+    from pscc.mesh.io import open_usd_stage
     from pscc.mesh.mesh_data import validate_mesh
 
     source = str(path)
-    try:
-        stage = Usd.Stage.Open(source)
-    except Exception as exc:  # pxr raises Tf.ErrorException (not a public base class) for a file it cannot parse
-        reasons = re.findall(r": '([^']*)'", str(exc))  # pxr's messages end in ": '<reason>'"
-        reason = reasons[0] if reasons else " ".join(str(exc).split())[:200]
-        raise InputError(source, "file", f"cannot be opened as a USD stage ({reason})",
-                         "export the frame again as USD (.usda, .usdc or .usdz)") from exc
-    if stage is None:
-        raise InputError(source, "file", "cannot be opened as a USD stage", "export the frame as USD")
+    stage = open_usd_stage(path, "export the frame again as USD (.usda, .usdc or .usdz)")
     meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
     if not meshes:
         raise InputError(source, "file", "holds no UsdGeom.Mesh", "export the cloth as a polygon mesh")

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from pscc.errors import InputError
+from pscc.mesh.io import open_usd_stage
 from pscc.mesh.mesh_data import validate_mesh
 
 __all__ = ["ANIMATION_EXTENSIONS", "Animation", "load_animation"]
@@ -116,9 +117,7 @@ def _load_usd(file: Path, prim_path: str | None) -> Animation:
     from pxr import Usd, UsdGeom
 
     source = str(file)
-    stage = Usd.Stage.Open(source)
-    if stage is None:
-        raise InputError(source, "file", "cannot be opened as a USD stage", "export the body as USD (usda/usdc/usdz)")
+    stage = open_usd_stage(file, "export the body as USD (usda/usdc/usdz)")
     if prim_path is not None:
         prim = stage.GetPrimAtPath(prim_path)
         if not prim or not prim.IsA(UsdGeom.Mesh):

@@ -34,6 +34,29 @@ _NPZ_OPTIONAL = ("vertices_end", "rest", "object_ids", "uv", "stitches")
 # --------------------------------------------------------------------------------------------
 
 
+def open_usd_stage(path: str | os.PathLike[str], fix: str) -> Any:
+    """Open a USD file as a ``Usd.Stage``; a file pxr cannot parse is an :class:`InputError` naming the file,
+    pxr's reason and ``fix`` (pxr itself raises ``Tf.ErrorException`` or returns None).
+
+    Raises:
+        InputError: the stage cannot be opened.
+    """
+    import re
+
+    from pxr import Usd
+
+    source = str(path)
+    try:
+        stage = Usd.Stage.Open(source)
+    except Exception as exc:  # Tf.ErrorException, which pxr does not expose as a base class to catch
+        reasons = re.findall(r": '([^']*)'", str(exc))  # pxr's messages end in ": '<reason>'"
+        reason = reasons[0] if reasons else " ".join(str(exc).split())[:200]
+        raise InputError(source, "file", f"cannot be opened as a USD stage ({reason})", fix) from exc
+    if stage is None:
+        raise InputError(source, "file", "cannot be opened as a USD stage", fix)
+    return stage
+
+
 def load_mesh(path: str | os.PathLike[str]) -> MeshData:
     """Load a triangle mesh from an OBJ, PLY or NPZ file.
 

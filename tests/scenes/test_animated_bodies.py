@@ -102,6 +102,10 @@ def test_bad_animations_name_the_file_and_the_fix(tmp_path: Path) -> None:
                                          r"sequence obstacles only"):
         load_scene_file(_write(tmp_path, SHEET + '[[obstacle]]\nsphere = { radius = 0.1 }\n'
                                'sequence_frame_rate = 10.0\n'))
+    (tmp_path / "broken.usda").write_text("#usda 1.0\n{{{ not a layer")
+    with pytest.raises(InputError, match=r"broken\.usda: file: cannot be opened as a USD stage \(.+\)\. Fix: "
+                                         r"export the body"):
+        load_animation(tmp_path / "broken.usda")
     np.savez(tmp_path / "body.npz", frames=frames, faces=faces)
     with pytest.raises(InputError, match=r"obstacle\[0\]\.sequence_frame_rate: "):
         load_scene_file(_write(tmp_path, SHEET + '[[obstacle]]\nsequence = "body.npz"\nsequence_frame_rate = 0\n'))
