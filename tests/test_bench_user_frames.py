@@ -66,6 +66,9 @@ def test_a_cached_corpus_frame_reads_back(tmp_path: Path) -> None:
     np.testing.assert_array_equal(frame.positions, mesh.vertices_end)
     np.testing.assert_array_equal(frame.object_ids, ids)
     assert "sheet f3" in frame.source and frame.rest is not None
+    np.savez(tmp_path / "bare.npz", positions=mesh.vertices_end)
+    with pytest.raises(InputError, match=r"bare\.npz: faces: is missing .*Fix: add the \(m, 3\) triangles"):
+        user_frames.load_user_frame(tmp_path / "bare.npz")
 
 
 def test_usd_meshes_merge_as_objects_in_world_coordinates(tmp_path: Path) -> None:

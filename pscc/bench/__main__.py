@@ -364,6 +364,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _environment(device: Any, repeats: int) -> dict[str, Any]:
+    """The machine, versions and repeats a report states at its top."""
     return {"date": time.strftime("%Y-%m-%d"), "device": device.alias,
             "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
             "warp": wp.__version__, "python": platform.python_version(), "repeats": repeats}
@@ -405,6 +406,7 @@ def _bench_frames(args: argparse.Namespace) -> int:
         return 2
     print(f"wrote {out} and {out.with_suffix('.json')}")
     return 0
+
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -117,15 +117,19 @@ def _is_corpus_npz(file: Path) -> bool:
 
 
 def _corpus_npz_frame(file: Path) -> CorpusFrame:
-    try:
-        frame = CorpusFrame.load(file)
-    except KeyError as exc:
-        raise InputError(str(file), str(exc.args[0]), "is missing from this corpus frame",
-                         "write it with CorpusFrame.save, or give keys vertices and faces") from exc
-    mesh = validate_mesh(frame.positions, frame.faces, source=str(file), rest=frame.rest,
-                         object_ids=frame.object_ids)
-    return CorpusFrame(file.stem, f"corpus frame `{file.name}` ({frame.name}: {frame.source})", mesh.vertices,
-                       mesh.faces, mesh.rest, frame.object_ids, frame.radius)
+    """An NPZ in the corpus layout (:meth:`CorpusFrame.save`): ``positions`` and ``faces``, optional ``rest``,
+    ``object_ids`` and the ``name`` and ``source`` of a cached frame."""
+    with np.load(file) as data:
+        if "faces" not in data.files:
+            raise InputError(str(file), "faces", "is missing (the file has positions, so it was read as a corpus "
+                             "frame)", "add the (m, 3) triangles as key faces, or name the positions vertices")
+        arrays = {key: data[key] for key in ("positions", "faces", "rest", "object_ids") if key in data.files}
+        origin = f" ({data['name']}: {data['source']})" if "name" in data.files and "source" in data.files else ""
+    mesh = validate_mesh(arrays["positions"], arrays["faces"], source=str(file), rest=arrays.get("rest"),
+                         object_ids=arrays.get("object_ids"))
+    ids = mesh.object_ids if "object_ids" in arrays else None
+    return CorpusFrame(file.stem, f"corpus frame `{file.name}`{origin}", mesh.vertices, mesh.faces, mesh.rest, ids,
+                       half_median_edge(mesh.vertices, mesh.faces))
 
 
 def _usd_frame(file: Path, usd_time: float | None) -> CorpusFrame:

@@ -37,6 +37,7 @@ from pscc.collision.feature_pairs import FeaturePairs
 from pscc.collision.front import NormalConeFront
 from pscc.collision.intrinsic import bvh_material
 from pscc.collision.narrow_phase import NarrowPhase
+from pscc.collision.scratch import held_arrays
 from pscc.collision.seams import SeamAdjacency
 from pscc.collision.spatial_hash import DEFAULT_CELL_SIZE_FACTOR, SpatialHash
 from pscc.collision.spatial_hash_settings import SLAB_PROBE_BACKOFF, fitted_capacities
@@ -82,28 +83,6 @@ class CollisionResult:
     edge_edge_toi: np.ndarray | None = None
     stats: dict[str, Any] = field(default_factory=dict)
 
-
-
-def held_arrays(owners: list[Any]) -> list[Any]:
-    """The ``wp.array`` and Warp struct values that ``owners`` and the pscc objects they hold (attributes,
-    lists, tuples, dicts) refer to now: a list that keeps that memory alive however the owners replace it."""
-    held: list[Any] = []
-    seen: set[int] = set()
-    stack = list(owners)
-    while stack:
-        value = stack.pop()
-        if id(value) in seen:
-            continue
-        seen.add(id(value))
-        if isinstance(value, wp.array) or type(value).__name__ == "StructInstance":
-            held.append(value)
-        elif isinstance(value, list | tuple):
-            stack.extend(value)
-        elif isinstance(value, dict):
-            stack.extend(value.values())
-        elif type(value).__module__.startswith("pscc.") and hasattr(value, "__dict__"):
-            stack.extend(vars(value).values())
-    return held
 
 class CollisionDetector:
     """Collision detection for a triangle mesh with fixed topology (one or several objects).
@@ -497,7 +476,6 @@ class CollisionDetector:
         Raises:
             InputError: a deferred input problem found on the device (boxes with NaN/Inf).
             CapacityError: more pairs than int32 buffers can hold.
-
             StaleGraphError: the last call was a graph recorded before a growth or a trim replaced the
                 buffers it writes (its rows are not in this detector's buffers): record it again.
 

@@ -9,12 +9,16 @@ entry, group and row tables) can be views into such a buffer instead of allocati
 table that must outlive the call (an *output*, such as the hash's pairs) only in a lender that allows it.
 The caller keeps the lenders' contract: nothing in a lent buffer is needed from the start of the
 borrower's call until the borrower's outputs have been read.
+
+:func:`held_arrays` lists the buffers an owner holds, so that an owner about to replace them can keep them
+alive for a graph that was recorded with them (the detector's stale-graph guard, docs/pscc.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import warp as wp
 
@@ -125,3 +129,25 @@ def place_tables(tables: Sequence[TableSpec], lenders: Sequence[Lender],
         else:
             placed[table.name] = wp.empty(table.count, dtype=table.dtype, device=device)
     return placed, lent
+
+
+def held_arrays(owners: list[Any]) -> list[Any]:
+    """The ``wp.array`` and Warp struct values that ``owners`` and the pscc objects they hold (attributes,
+    lists, tuples, dicts) refer to now: a list that keeps that memory alive however the owners replace it."""
+    held: list[Any] = []
+    seen: set[int] = set()
+    stack = list(owners)
+    while stack:
+        value = stack.pop()
+        if id(value) in seen:
+            continue
+        seen.add(id(value))
+        if isinstance(value, wp.array) or type(value).__name__ == "StructInstance":
+            held.append(value)
+        elif isinstance(value, list | tuple):
+            stack.extend(value)
+        elif isinstance(value, dict):
+            stack.extend(value.values())
+        elif type(value).__module__.startswith("pscc.") and hasattr(value, "__dict__"):
+            stack.extend(vars(value).values())
+    return held
