@@ -41,6 +41,7 @@ from pscc.geometry.distance import (
     edge_edge_closest_point,
     edge_edge_distance_squared,
     edge_edge_distance_squared_at,
+    projection_outside_triangle,
     vertex_face_closest_point,
     vertex_face_distance_squared,
     vertex_face_distance_squared_at,
@@ -244,7 +245,15 @@ def vertex_face_proximity_toi(
     rounding bound (its weights are a convex combination), so a pair it puts within the thickness
     is a contact as on a well-shaped face; it may overestimate by at most
     ``thin_overestimate x L`` (``ILL_CONDITIONED_REL_ERROR``, doubled), so a pair beyond the
-    thickness by more than that is not. Only pairs in between run the exact-safe inclusion search."""
+    thickness by more than that is not.
+
+    A pair in between whose projection is certified outside the face
+    (:func:`pscc.geometry.distance.projection_outside_triangle`) has its closest point on an edge, so the
+    smallest of the three point-edge distances decides it, each within the edge-edge bound (``error / 2``
+    at the edge's own local scale, at most twice the face's) and 7 ``EPS32 L`` more for the rounded points
+    of the certificate: within ``thickness + error / 2`` it is a contact (truly within ``thickness + 1.5
+    error``, as every reported pair), beyond ``thickness + 1.75 error`` it is not (truly beyond ``thickness
+    + error / 2``, as every rejected pair). Only the rest run the exact-safe inclusion search."""
     ab = b - a
     ac = c - a
     n = wp.cross(ab, ac)
@@ -261,6 +270,14 @@ def vertex_face_proximity_toi(
         return 0.0
     if distance > thickness + error + proximity.thin_overestimate * scale:
         return 2.0
+    if projection_outside_triangle(p, a, b, c):
+        edge_sq = wp.min(wp.min(edge_edge_distance_squared(a, b, p, p), edge_edge_distance_squared(b, c, p, p)),
+                         edge_edge_distance_squared(c, a, p, p))
+        edge_distance = wp.sqrt(edge_sq)
+        if edge_distance <= thickness + 0.5 * error:
+            return 0.0
+        if edge_distance > thickness + 1.75 * error:
+            return 2.0
     return vertex_face_ccd_toi(p, a, b, c, p, a, b, c, thickness, 0.0, params)
 
 

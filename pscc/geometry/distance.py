@@ -71,6 +71,7 @@ __all__ = [
     "edge_edge_closest_points",
     "edge_edge_distance",
     "edge_edge_distance_squared",
+    "projection_outside_triangle",
     "vertex_face_closest_point",
     "vertex_face_closest_points",
     "vertex_face_distance",
@@ -81,6 +82,7 @@ _MIN_LOCAL_SCALE = wp.constant(wp.float32(_tol.MIN_LOCAL_SCALE))
 _TRIANGLE_DEGENERATE_REL_SQ = wp.constant(wp.float32(_tol.TRIANGLE_DEGENERATE_REL_SQ))
 _EDGE_DEGENERATE_REL_SQ = wp.constant(wp.float32(_tol.EDGE_DEGENERATE_REL_SQ))
 _EDGE_PARALLEL_REL_SQ = wp.constant(wp.float32(_tol.EDGE_PARALLEL_REL_SQ))
+_OUTSIDE_MARGIN = wp.constant(wp.float32(_tol.PROJECTION_SIDE_ERROR))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -368,6 +370,38 @@ def edge_edge_distance_squared_at(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.
     parameters too)."""
     r = _edge_edge_offset(a0, a1, b0, b1, st)
     return wp.dot(r, r)
+
+
+@wp.func
+def projection_outside_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
+    """Whether ``p``'s projection onto the plane of triangle ``(a, b, c)`` is certified to lie outside
+    the triangle, so that the closest point of the triangle to ``p`` lies on one of its edges.
+
+    Thin triangles make the closest point ill-conditioned, but not this side test: each edge's signed
+    face weight ``n . (e x (p - v))`` (``n = ab x ac``; coordinates shifted to ``a`` and scaled by the
+    local scale ``L``) must be below minus its rounding bound
+    :data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR`. The answer holds for the points as
+    the shift and scale round them, each moved by at most ``2 sqrt(3) * 2**-24 * L``: a distance decided
+    from it is off by at most twice that (:func:`pscc.collision.narrow_phase.vertex_face_proximity_toi`).
+    ``False`` ("not certified", never a wrong ``True``) also for zero-area triangles and a zero local
+    scale.
+    """
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    scale = wp.max(wp.max(_max_abs(ab), _max_abs(ac)), _max_abs(ap))
+    if not (scale > _MIN_LOCAL_SCALE):
+        return False
+    inv = 1.0 / scale
+    ab = ab * inv
+    ac = ac * inv
+    ap = ap * inv
+    n = wp.cross(ab, ac)
+    if wp.dot(n, wp.cross(ab, ap)) < -_OUTSIDE_MARGIN:
+        return True
+    if wp.dot(n, wp.cross(ap, ac)) < -_OUTSIDE_MARGIN:
+        return True
+    return wp.dot(n, wp.cross(ac - ab, ap - ab)) < -_OUTSIDE_MARGIN
 
 
 # ------------------------------------------------------------------------------------------------

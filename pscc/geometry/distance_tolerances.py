@@ -86,3 +86,18 @@ above :data:`TRIANGLE_DEGENERATE_REL_SQ` and by at most half the smallest height
 two meet at about ``sqrt(EPS32) * L ~ 3.5e-4 * L``. Rationale: the worst over-estimate measured
 is ``2.9e-4 * L``; ``1e-3`` leaves a factor above 3.
 """
+
+PROJECTION_SIDE_ERROR: float = 512.0 * 2.0**-24
+"""Rounding bound on the signed face weights ``n . (e x (p - v))`` of
+:func:`pscc.geometry.distance.projection_outside_triangle`, whose coordinates are shifted to ``a`` and
+scaled by ``1 / L`` (every component of ``ab``, ``ac``, ``ap`` at most 1 in magnitude).
+
+Rationale, with unit roundoff ``u = 2**-24`` and the scaled coordinates taken as exact (they describe
+the points as moved by the shift and scale, which the caller accounts for): a cross-product component
+``x1 y2 - x2 y1`` of factors at most ``A`` and ``B`` rounds with error at most ``4u A B``. So ``n = ab x
+ac`` has components at most 2 with error ``4u``, and so has ``ab x ap`` (and ``ap x ac``); their dot
+product errs by at most ``3 (2 * 4u + 4u * 2) + 3u * 3 * 4 = 84u``. For edge ``bc`` the differences
+``ac - ab`` and ``ap - ab`` (components at most 2) round by ``2u``, their cross product has components at
+most 8 with error ``32u``, and the dot product with ``n`` errs by at most ``3 (2 * 32u + 4u * 8) + 3u * 3
+* 16 = 336u``. ``512u`` covers the three with room for the second-order terms.
+"""

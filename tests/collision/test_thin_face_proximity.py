@@ -1,9 +1,11 @@
 """Discrete vertex-face proximity on nearly flat triangles (flatness below ``WELL_SHAPED_MIN_FLATNESS``).
 
 :func:`pscc.collision.narrow_phase.vertex_face_proximity_toi` decides such a pair by the closed-form
-distance except in a band of ``thin_overestimate x L`` past the thickness, where the exact-safe search
-runs. Checked against a float64 reference: no pair within the thickness is missed, and every pair
-reported is within the closed form's rounding band or reported by the search as well.
+distance except in a band of ``thin_overestimate x L`` past the thickness; there a pair whose projection is
+certified outside the face is decided by its edges, and the rest by the exact-safe search. Checked against a
+float64 reference: no pair within the thickness is missed, every pair reported is within the rounding band
+or reported by the search as well, and every pair rejected is beyond the thickness by half the rounding
+band, as on a well-shaped face.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pscc.geometry import distance as dist
 from pscc.geometry import distance_tolerances as tol
 from pscc.geometry.ccd import CcdParameters, ccd_parameters, vertex_face_ccd_toi
 from tests.geometry.test_distance import local_scale, ref_vertex_face, triangle_flatness
+from tests.geometry.test_projection_side import side_weights as ref_side_weights
 
 
 @wp.kernel
@@ -98,5 +101,13 @@ def test_thin_faces_miss_no_contact_and_add_only_the_rounding_band(device: str, 
     assert np.all(reported[must]), np.flatnonzero(must & ~reported)[:10]
     # Every report is within the closed form's band (|d_float32 - d_exact| <= error / 2) or the search's.
     assert np.all(~reported | (exact <= h + 1.5 * error) | searched)
-    # In the band the search decides alone.
-    assert np.array_equal(reported[in_band], searched[in_band])
+    # Every rejected pair is beyond the thickness by half the rounding band (float64's own rounding aside).
+    assert np.all(reported | (exact > h + 0.5 * error - 1e-12 * scale)), np.flatnonzero(
+        ~reported & (exact <= h + 0.5 * error - 1e-12 * scale))[:10]
+    # In the band, where the decision by the edges and the search differ, the pair is truly beyond the
+    # thickness: the search's own tolerance is wider than the edges' (it reports pairs up to several
+    # rounding bands out), never narrower.
+    differ = in_band & (reported != searched)
+    assert np.all(exact[differ] > h[differ])
+    beside = in_band & (ref_side_weights(queries).min(axis=1) < 0)
+    assert np.count_nonzero(beside) > 20
