@@ -46,8 +46,11 @@ from pscc.geometry.distance import (
     vertex_face_distance_squared,
     vertex_face_distance_squared_at,
 )
+from pscc.geometry.distance_tolerances import EPS32 as _EPS32_VALUE
 
 wp.set_module_options({"enable_backward": False})
+
+EPS32 = wp.constant(wp.float32(_EPS32_VALUE))
 
 
 @wp.struct
@@ -306,6 +309,41 @@ def edges_certified_apart(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, th
     return segments_separated(a0, a1, b0, b1, thickness)
 
 
+@wp.func
+def certain_contact_sq(thickness: float) -> float:
+    """The squared length below which two points are certified within ``thickness`` of each other by
+    :func:`points_within`: ``thickness^2`` shrunk by ``8 EPS32``, more than the rounding of both squares
+    (the computed ``|p - q|^2`` is at least ``(1 - 7u) |p - q|^2`` and this bound at most ``(1 - 14u)
+    thickness^2``, ``u = 2**-24``), so a certified pair is truly closer than ``thickness`` (for a
+    thickness whose square is a normal float32, above about ``1e-19``)."""
+    return thickness * thickness * (1.0 - 8.0 * EPS32)
+
+
+@wp.func
+def points_within(p: wp.vec3, q: wp.vec3, certain_sq: float) -> bool:
+    """Whether ``p`` and ``q`` are certified closer than the thickness whose :func:`certain_contact_sq` is
+    ``certain_sq``. A feature pair with such a pair of points (a vertex and a corner of the face, an end
+    of each edge) is a contact without its closest points: dense contact, where most rows hold one, skips
+    the closed form for them."""
+    d = p - q
+    return wp.dot(d, d) < certain_sq
+
+
+@wp.func
+def corner_within(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, certain_sq: float) -> bool:
+    """Whether vertex ``p`` is certified within the thickness of a corner of face ``(a, b, c)``
+    (:func:`points_within`)."""
+    return points_within(p, a, certain_sq) or points_within(p, b, certain_sq) or points_within(p, c, certain_sq)
+
+
+@wp.func
+def ends_within(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.vec3, certain_sq: float) -> bool:
+    """Whether an end of edge ``(a0, a1)`` is certified within the thickness of an end of edge ``(b0, b1)``
+    (:func:`points_within`)."""
+    return (points_within(a0, b0, certain_sq) or points_within(a0, b1, certain_sq)
+            or points_within(a1, b0, certain_sq) or points_within(a1, b1, certain_sq))
+
+
 @wp.struct
 class ProximityTest:
     """The discrete proximity test of a narrow phase, for a kernel that runs it itself
@@ -332,7 +370,9 @@ def _vertex_face_proximity(
     hit_counts: wp.array(dtype=wp.int32),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid vertex-face rows (``counts[0]``, clamped):
-    :func:`_vertex_face_proximity_toi`; hits add 1 to ``hit_counts[0]``."""
+    a vertex certified within the thickness of a face corner (:func:`corner_within`) is a contact, the
+    others go through :func:`vertex_face_proximity_toi`; hits add 1 to ``hit_counts[0]``."""
+    certain_sq = certain_contact_sq(thickness)
     for i in range(wp.tid(), valid_rows(counts, 0, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         f = faces[pair[1]]
@@ -340,8 +380,10 @@ def _vertex_face_proximity(
         a = positions[f[0]]
         b = positions[f[1]]
         c = positions[f[2]]
-        toi = vertex_face_proximity_toi(p, a, b, c, vertex_face_closest_point(p, a, b, c), thickness, params,
-                                        proximity)
+        toi = float(0.0)
+        if not corner_within(p, a, b, c, certain_sq):
+            toi = vertex_face_proximity_toi(p, a, b, c, vertex_face_closest_point(p, a, b, c), thickness, params,
+                                            proximity)
         toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 0, 1)
@@ -362,7 +404,10 @@ def _edge_edge_proximity(
     hit_counts: wp.array(dtype=wp.int32),
 ):
     """Row kernel (:mod:`pscc._lanes`) over the valid edge-edge rows (``counts[1]``, clamped):
-    closed-form distance (its bound holds for every edge pair); hits add 1 to ``hit_counts[1]``."""
+    a pair with ends certified within the thickness (:func:`ends_within`) is a contact, the others go
+    through the separation certificate and the closed-form distance (its bound holds for every edge pair);
+    hits add 1 to ``hit_counts[1]``."""
+    certain_sq = certain_contact_sq(thickness)
     for i in range(wp.tid(), valid_rows(counts, 1, wp.min(pairs.shape[0], toi_out.shape[0])), lanes):
         pair = pairs[i]
         ea = edges[pair[0]]
@@ -371,10 +416,12 @@ def _edge_edge_proximity(
         a1 = positions[ea[1]]
         b0 = positions[eb[0]]
         b1 = positions[eb[1]]
-        toi = float(NO_HIT)
-        if not edges_certified_apart(a0, a1, b0, b1, thickness, proximity):
-            toi = edge_edge_proximity_toi(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1), thickness,
-                                          proximity)
+        toi = float(0.0)
+        if not ends_within(a0, a1, b0, b1, certain_sq):
+            toi = float(NO_HIT)
+            if not edges_certified_apart(a0, a1, b0, b1, thickness, proximity):
+                toi = edge_edge_proximity_toi(a0, a1, b0, b1, edge_edge_closest_point(a0, a1, b0, b1), thickness,
+                                              proximity)
         toi_out[i] = toi
         if toi <= 1.0:
             wp.atomic_add(hit_counts, 1, 1)
