@@ -82,7 +82,8 @@ _MIN_LOCAL_SCALE = wp.constant(wp.float32(_tol.MIN_LOCAL_SCALE))
 _TRIANGLE_DEGENERATE_REL_SQ = wp.constant(wp.float32(_tol.TRIANGLE_DEGENERATE_REL_SQ))
 _EDGE_DEGENERATE_REL_SQ = wp.constant(wp.float32(_tol.EDGE_DEGENERATE_REL_SQ))
 _EDGE_PARALLEL_REL_SQ = wp.constant(wp.float32(_tol.EDGE_PARALLEL_REL_SQ))
-_OUTSIDE_MARGIN = wp.constant(wp.float32(_tol.PROJECTION_SIDE_ERROR))
+_SIDE_ERROR_PER_NORMAL = wp.constant(wp.float32(_tol.PROJECTION_SIDE_ERROR_PER_NORMAL))
+_SIDE_ERROR_BASE = wp.constant(wp.float32(_tol.PROJECTION_SIDE_ERROR_BASE))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -373,18 +374,27 @@ def edge_edge_distance_squared_at(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.
 
 
 @wp.func
+def _beyond_edge(n: wp.vec3, normal_max: float, edge: wp.vec3, offset: wp.vec3) -> bool:
+    """Whether the signed face weight ``n . (edge x offset)`` is below minus its rounding bound
+    (:data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR_PER_NORMAL`): the point at ``offset``
+    from the edge's first end is certified on the outer side of the edge's line, in the triangle's plane."""
+    bound = _max_abs(edge) * _max_abs(offset) * (_SIDE_ERROR_PER_NORMAL * normal_max + _SIDE_ERROR_BASE)
+    return wp.dot(n, wp.cross(edge, offset)) < -bound
+
+
+@wp.func
 def projection_outside_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> bool:
     """Whether ``p``'s projection onto the plane of triangle ``(a, b, c)`` is certified to lie outside
     the triangle, so that the closest point of the triangle to ``p`` lies on one of its edges.
 
     Thin triangles make the closest point ill-conditioned, but not this side test: each edge's signed
     face weight ``n . (e x (p - v))`` (``n = ab x ac``; coordinates shifted to ``a`` and scaled by the
-    local scale ``L``) must be below minus its rounding bound
-    :data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR`. The answer holds for the points as
-    the shift and scale round them, each moved by at most ``2 sqrt(3) * 2**-24 * L``: a distance decided
-    from it is off by at most twice that (:func:`pscc.collision.narrow_phase.vertex_face_proximity_toi`).
-    ``False`` ("not certified", never a wrong ``True``) also for zero-area triangles and a zero local
-    scale.
+    local scale ``L``) must be below minus its rounding bound, which scales with the edge and the point's
+    offset (:data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR_PER_NORMAL`). The answer holds
+    for the points as the shift and scale round them, each moved by at most ``2 sqrt(3) * 2**-24 * L``: a
+    distance decided from it is off by at most twice that
+    (:func:`pscc.collision.narrow_phase.vertex_face_proximity_toi`). ``False`` ("not certified", never a
+    wrong ``True``) also for zero-area triangles and a zero local scale.
     """
     ab = b - a
     ac = c - a
@@ -397,11 +407,13 @@ def projection_outside_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) 
     ac = ac * inv
     ap = ap * inv
     n = wp.cross(ab, ac)
-    if wp.dot(n, wp.cross(ab, ap)) < -_OUTSIDE_MARGIN:
+    normal_max = _max_abs(n)
+    if _beyond_edge(n, normal_max, ab, ap):
         return True
-    if wp.dot(n, wp.cross(ap, ac)) < -_OUTSIDE_MARGIN:
+    # Edge c -> a: (a - c) x (p - c) = ap x ac = (-ac) x ap.
+    if _beyond_edge(n, normal_max, -ac, ap):
         return True
-    return wp.dot(n, wp.cross(ac - ab, ap - ab)) < -_OUTSIDE_MARGIN
+    return _beyond_edge(n, normal_max, ac - ab, ap - ab)
 
 
 # ------------------------------------------------------------------------------------------------

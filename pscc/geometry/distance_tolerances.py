@@ -87,17 +87,26 @@ two meet at about ``sqrt(EPS32) * L ~ 3.5e-4 * L``. Rationale: the worst over-es
 is ``2.9e-4 * L``; ``1e-3`` leaves a factor above 3.
 """
 
-PROJECTION_SIDE_ERROR: float = 512.0 * 2.0**-24
-"""Rounding bound on the signed face weights ``n . (e x (p - v))`` of
-:func:`pscc.geometry.distance.projection_outside_triangle`, whose coordinates are shifted to ``a`` and
-scaled by ``1 / L`` (every component of ``ab``, ``ac``, ``ap`` at most 1 in magnitude).
+PROJECTION_SIDE_ERROR_PER_NORMAL: float = 84.0 * 2.0**-24
+"""With :data:`PROJECTION_SIDE_ERROR_BASE`, the rounding bound on a signed face weight ``s = n . (e x
+(p - v))`` of :func:`pscc.geometry.distance.projection_outside_triangle`:
+``|s_float32 - s| <= E P (PROJECTION_SIDE_ERROR_PER_NORMAL N + PROJECTION_SIDE_ERROR_BASE)``, with ``N``,
+``E`` and ``P`` the largest absolute components of ``n = ab x ac``, of the edge ``e`` and of ``p - v``, all in
+coordinates shifted to ``a`` and scaled by ``1 / L`` (every component of ``ab``, ``ac``, ``ap`` at most 1).
 
-Rationale, with unit roundoff ``u = 2**-24`` and the scaled coordinates taken as exact (they describe
-the points as moved by the shift and scale, which the caller accounts for): a cross-product component
-``x1 y2 - x2 y1`` of factors at most ``A`` and ``B`` rounds with error at most ``4u A B``. So ``n = ab x
-ac`` has components at most 2 with error ``4u``, and so has ``ab x ap`` (and ``ap x ac``); their dot
-product errs by at most ``3 (2 * 4u + 4u * 2) + 3u * 3 * 4 = 84u``. For edge ``bc`` the differences
-``ac - ab`` and ``ap - ab`` (components at most 2) round by ``2u``, their cross product has components at
-most 8 with error ``32u``, and the dot product with ``n`` errs by at most ``3 (2 * 32u + 4u * 8) + 3u * 3
-* 16 = 336u``. ``512u`` covers the three with room for the second-order terms.
+Rationale, with unit roundoff ``u = 2**-24`` and the scaled coordinates taken as exact (they describe the
+points as moved by the shift and scale, which the caller accounts for):
+- a cross-product component ``x1 y2 - x2 y1`` rounds with error at most ``2u (|x1 y2| + |x2 y1|)``;
+- so each component of ``n`` errs by at most ``4u`` (factors at most 1);
+- each component of ``m = e x (p - v)`` errs by at most ``8u E P``, counting the rounding of ``e = ac -
+  ab`` and ``p - v = ap - ab`` for edge ``bc`` (``u`` relative each);
+- ``|m_i| <= 2 E P``, and ``|n_i| <= N``;
+- the three-term dot product then errs by at most ``3 N 8u E P + 3 * 4u * 2 E P + 3u * 3 N 2 E P = u E P (42 N
+  + 24)``.
+Doubled, to cover the second-order terms and ``N``, ``E``, ``P`` taken from the rounded values: ``84`` and
+``48``. The bound scales with the edge and the point's offset, so a vertex beside a sliver's short edge is
+certified as readily as one beside its long edges.
 """
+
+PROJECTION_SIDE_ERROR_BASE: float = 48.0 * 2.0**-24
+"""The constant term of the side-weight rounding bound (:data:`PROJECTION_SIDE_ERROR_PER_NORMAL`)."""

@@ -46,16 +46,23 @@ def side_weights(queries: np.ndarray) -> np.ndarray:
     return np.stack(rows, axis=1)
 
 
-def _scaled_weights(queries: np.ndarray) -> np.ndarray:
-    """(n, 3) float64 signed face weights as the kernel forms them: shifted to ``a``, scaled by the largest
-    absolute coordinate of ``ab``, ``ac``, ``ap``."""
+def _scaled_margins(queries: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 signed face weights as the kernel forms them (shifted to ``a``, scaled by the largest
+    absolute coordinate of ``ab``, ``ac``, ``ap``), each divided by its rounding bound
+    (``PROJECTION_SIDE_ERROR_PER_NORMAL``): below -1 the kernel must certify the point outside."""
     P = queries.astype(np.float64)
     ab, ac, ap = P[:, 2] - P[:, 1], P[:, 3] - P[:, 1], P[:, 0] - P[:, 1]
     scale = np.abs(np.stack([ab, ac, ap], axis=1)).max(axis=(1, 2))[:, None]
     ab, ac, ap = ab / scale, ac / scale, ap / scale
     n = np.cross(ab, ac)
-    rows = [np.cross(ab, ap), np.cross(ap, ac), np.cross(ac - ab, ap - ab)]
-    return np.stack([np.einsum("ij,ij->i", n, m) for m in rows], axis=1)
+    normal_max = np.abs(n).max(axis=1)
+    rows = []
+    for edge, offset in ((ab, ap), (-ac, ap), (ac - ab, ap - ab)):
+        bound = (np.abs(edge).max(axis=1) * np.abs(offset).max(axis=1)
+                 * (tol.PROJECTION_SIDE_ERROR_PER_NORMAL * normal_max + tol.PROJECTION_SIDE_ERROR_BASE))
+        weight = np.einsum("ij,ij->i", n, np.cross(edge, offset))
+        rows.append(weight / np.maximum(bound, 1e-300))
+    return np.stack(rows, axis=1)
 
 
 def _queries(seed: int, n: int, spread_exponent: tuple[float, float]) -> np.ndarray:
@@ -78,9 +85,9 @@ def test_certified_outside_only_when_truly_outside(device: str, spread: tuple[fl
     side = side_weights(queries)
     truly_outside = side.min(axis=1) < -1e-12
     assert not np.any(outside & ~truly_outside), np.flatnonzero(outside & ~truly_outside)[:10]
-    # Every point beside the triangle by twice the margin of the kernel's own scaled weights is certified
-    # (their rounding error is below the margin).
-    clearly = _scaled_weights(queries).min(axis=1) < -2.0 * tol.PROJECTION_SIDE_ERROR
+    # Every point beside an edge by twice that edge's rounding bound is certified (the weights' rounding
+    # error is below the bound).
+    clearly = _scaled_margins(queries).min(axis=1) < -2.0
     assert np.count_nonzero(clearly) > 1000
     assert np.all(outside[clearly]), np.flatnonzero(clearly & ~outside)[:10]
     assert np.count_nonzero(~outside & truly_outside) < np.count_nonzero(truly_outside)
@@ -111,3 +118,16 @@ def test_points_on_an_edge_line_or_vertex_are_not_certified(device: str) -> None
     beside = cases[:2].copy()
     beside[:, 0, 1] = -0.05
     assert np.all(_run(beside, device))
+
+
+def test_points_beyond_a_sliver_short_edge_are_certified(device: str) -> None:
+    """A sliver 1 long and 1e-4 wide: points just beyond its short edge (its far end), in its plane and a
+    little off it, are certified outside (the bound scales with the short edge), points just inside are not.
+    (Far off the plane the normal's own rounding, 4 units absolute, outweighs a 1e-4-wide face's weight.)"""
+    a, b, c = [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1e-4, 0.0]
+    beyond = [[1.0 + d, 5e-5, z, *a, *b, *c] for d in (1e-3, 1e-2) for z in (0.0, 0.01)]
+    inside = [[1.0 - d, 5e-5, z, *a, *b, *c] for d in (1e-3, 1e-2) for z in (0.0, 0.01)]
+    queries = np.array(beyond + inside, dtype=np.float32).reshape(-1, 4, 3)
+    got = _run(queries, device)
+    assert got[: len(beyond)].all()
+    assert not got[len(beyond):].any()
