@@ -99,6 +99,34 @@ def test_usd_meshes_merge_as_objects_in_world_coordinates(tmp_path: Path) -> Non
         user_frames.load_user_frame(path, usd_time=9.0)
 
 
+def test_usd_polygons_that_repeat_a_corner_leave_out_their_degenerate_triangles(tmp_path: Path) -> None:
+    """A pentagon that visits corner 1 twice (as exporters write polygons that touch themselves) fans into the
+    triangles (1, 2, 1) and (1, 1, 3) with no area: they are left out and counted, and so is a triangle given
+    twice; the rest are kept."""
+    from pxr import Usd, UsdGeom
+
+    path = tmp_path / "spike.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Cloth")
+    mesh.GetPointsAttr().Set([(0, 0, 0), (1, 0, 0), (2, 0.5, 0), (1, 1, 0), (0, 1, 0)])
+    mesh.GetFaceVertexCountsAttr().Set([5, 3, 3])
+    mesh.GetFaceVertexIndicesAttr().Set([1, 2, 1, 3, 4, 0, 1, 4, 4, 0, 1])  # the last: the second again
+    stage.GetRootLayer().Save()
+    frame = user_frames.load_user_frame(path)
+    assert frame.faces.tolist() == [[1, 3, 4], [0, 1, 4]]
+    assert "2 fan triangles that repeat a vertex" in frame.source
+    assert "1 triangle over the same three corners as another left out" in frame.source
+    all_spikes = tmp_path / "spikes.usda"
+    stage = Usd.Stage.CreateNew(str(all_spikes))
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Spike")
+    mesh.GetPointsAttr().Set([(0, 0, 0), (1, 0, 0)])
+    mesh.GetFaceVertexCountsAttr().Set([3])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 0])
+    stage.GetRootLayer().Save()
+    with pytest.raises(InputError, match="faceVertexIndices.*no triangle is left"):
+        user_frames.load_user_frame(all_spikes)
+
+
 @pytest.mark.parametrize("case", ["missing", "extension", "radius", "not npz", "no mesh", "bad faces", "not usd"])
 def test_bad_input_names_the_file_and_the_fix(tmp_path: Path, case: str) -> None:
     path, radius = tmp_path / "frame.obj", None

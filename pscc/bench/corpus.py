@@ -291,7 +291,9 @@ USD_TIME_NOTE: str = "the default time when its points have a default value, els
 def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, str]:
     """Every ``UsdGeom.Mesh`` of a USD stage as one triangle mesh: each mesh's points at ``usd_time`` (None:
     :data:`USD_TIME_NOTE`), moved by its local-to-world transform at that time, its polygons fan-triangulated
-    (:func:`fan_triangles`), one object id per mesh.
+    (:func:`fan_triangles`), one object id per mesh. A polygon that visits a corner twice fans into
+    triangles that repeat a vertex id, and two polygons over the same corners give a triangle twice; those
+    are left out (the first of a repeated triangle kept), and ``what`` says how many.
 
     Returns:
         ``(positions (n, 3) float32, faces (m, 3) int32, object_ids (m,) int32 or None for one mesh, what)``,
@@ -316,6 +318,7 @@ def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarr
     cache = UsdGeom.XformCache()
     blocks, face_blocks, ids = [], [], []
     offset = 0
+    repeated = duplicated = 0
     for k, prim in enumerate(meshes):
         mesh = UsdGeom.Mesh(prim)
         points = mesh.GetPointsAttr()
@@ -340,6 +343,19 @@ def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarr
         matrix = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64).reshape(4, 4)
         blocks.append(local @ matrix[:3, :3] + matrix[3, :3])  # USD matrices act on row vectors
         faces = fan_triangles(counts, indices)
+        # A polygon that visits a corner twice fans into triangles that repeat a vertex id: no area, and
+        # topology the detector refuses. They are left out (and counted in the description).
+        repeats = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+        if np.all(repeats):
+            raise InputError(source, f"{prim.GetPath()}.faceVertexIndices", "every polygon repeats a corner, so "
+                             "no triangle is left", "re-export the mesh with simple polygons")
+        repeated += int(np.count_nonzero(repeats))
+        faces = faces[~repeats]
+        # Two polygons over the same corners (or one fanned into the same triangle twice) give a triangle
+        # twice: the first is kept.
+        _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+        duplicated += faces.shape[0] - first.size
+        faces = faces[np.sort(first)]
         face_blocks.append(faces + offset)
         ids.append(np.full(faces.shape[0], k, dtype=np.int32))
         offset += local.shape[0]
@@ -348,6 +364,11 @@ def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarr
     names = ", ".join(f"`{p.GetPath()}`" for p in meshes[:4]) + (" ..." if len(meshes) > 4 else "")
     when = USD_TIME_NOTE if usd_time is None else f"time code {usd_time:g}"
     what = f"{len(meshes)} mesh{'es' if len(meshes) > 1 else ''} ({names}) at {when}"
+    if repeated:
+        what += (f"; {repeated} fan triangle{'s' if repeated > 1 else ''} that repeat a vertex (polygons that visit "
+                 "a corner twice) left out")
+    if duplicated:
+        what += f"; {duplicated} triangle{'s' if duplicated > 1 else ''} over the same three corners as another left out"
     return (mesh_data.vertices, mesh_data.faces, mesh_data.object_ids if len(meshes) > 1 else None, what)
 
 
