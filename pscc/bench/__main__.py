@@ -265,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="triangle counts for the broad-phase comparison (none to skip it)")
     parser.add_argument("--corpus", choices=("full", "quick", "skip"), default="full",
                         help="broad phase on realistic frames (paper scenes, Newton's cloth examples, shirt, bunny, "
-                        "bear, two CAD assemblies and a cube of slivers) against spatial hashing, Newton and ipctk: full (16 frames; "
-                        "about 17 min to "
+                        "bear, two CAD assemblies and a cube of slivers) against spatial hashing, Newton and ipctk: "
+                        "full (16 frames; about 17 min to "
                         "simulate them the first time, then cached, and about 2 min to measure on 2 CPU cores), "
                         "quick (3 early frames, under a minute) or skip")
     parser.add_argument("--corpus-cache", default=str(corpus.DEFAULT_CACHE_DIR),

@@ -372,7 +372,8 @@ def read_usd_meshes(path: Path, usd_time: float | None = None) -> tuple[np.ndarr
         what += (f"; {repeated} fan triangle{'s' if repeated > 1 else ''} that repeat a vertex (polygons that visit "
                  "a corner twice) left out")
     if duplicated:
-        what += f"; {duplicated} triangle{'s' if duplicated > 1 else ''} over the same three corners as another left out"
+        what += (f"; {duplicated} triangle{'s' if duplicated > 1 else ''} over the same three corners as another "
+                 "left out")
     return (mesh_data.vertices, mesh_data.faces, mesh_data.object_ids if len(meshes) > 1 else None, what)
 
 
