@@ -376,8 +376,10 @@ def edge_edge_distance_squared_at(a0: wp.vec3, a1: wp.vec3, b0: wp.vec3, b1: wp.
 @wp.func
 def _beyond_edge(n: wp.vec3, normal_max: float, edge: wp.vec3, offset: wp.vec3) -> bool:
     """Whether the signed face weight ``n . (edge x offset)`` is below minus its rounding bound
-    (:data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR_PER_NORMAL`): the point at ``offset``
-    from the edge's first end is certified on the outer side of the edge's line, in the triangle's plane."""
+    (:data:`~pscc.geometry.distance_tolerances.PROJECTION_SIDE_ERROR_PER_NORMAL`), so that the point is
+    certified on the outer side of the edge's line, in the triangle's plane. ``edge x offset`` is the edge
+    vector crossed with the point's offset from one of the edge's ends (any cross product of equal value will
+    do: for edge c -> a the caller passes ``(-ac) x ap``, equal to ``(a - c) x (p - c)``)."""
     bound = _max_abs(edge) * _max_abs(offset) * (_SIDE_ERROR_PER_NORMAL * normal_max + _SIDE_ERROR_BASE)
     return wp.dot(n, wp.cross(edge, offset)) < -bound
 
