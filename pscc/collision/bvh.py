@@ -72,8 +72,43 @@ def _segment_starts(lengths: np.ndarray) -> np.ndarray:
     return (np.cumsum(lengths) - lengths).astype(np.int64)
 
 
-def _face_panels(topology: MeshTopology, object_ids: np.ndarray) -> np.ndarray:
-    """Smallest face id of each face's panel (faces of one object connected through shared edges).
+FEATURE_EDGE_COSINE: float = 0.5
+"""An edge between two faces whose unit normals have a dot product below this (normals more than 60 degrees
+apart) is a feature edge of a shape the BVH embeds (:meth:`MaterialBvh.build`, ``feature_shape``): panels are
+cut there, so the flat cap of a cylinder or a smooth face of a CAD part gets a subtree of its own.
+
+A node across such an edge rarely passes the normal-cone test, and the median splits of a whole closed
+surface mix the faces on both sides. Measured without rest coordinates:
+- a cylinder whose caps are fans of slivers: 482 front nodes for its 1,024 faces before, 9 after, and a
+  graph replay 3.1 times faster;
+- Newton's CAD assemblies: 3-4 % fewer triangle pairs and a 5-9 % faster replay;
+- cloth folds as sharp as this also cut a panel: the corpus's cloth frames changed by at most 0.13 % in
+  pairs;
+- the low-poly `bear`, a fifth of whose edges are this sharp, fell into 208 panels: 406 pairs instead of 292,
+  with a 4 % faster replay."""
+
+
+def _feature_edges(faces: np.ndarray, shape: np.ndarray, topology: MeshTopology) -> np.ndarray:
+    """(edge_count,) bool: the edges of exactly two faces whose normals in ``shape`` are more than
+    :data:`FEATURE_EDGE_COSINE` apart (faces of zero area have no normal and cut nothing)."""
+    corners = shape[faces]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    valid = length > 0.0
+    normal[valid] /= length[valid, None]
+    offsets = topology.edge_face_offsets.astype(np.int64)
+    two = np.flatnonzero(np.diff(offsets) == 2)
+    first = topology.edge_face_indices[offsets[two]]
+    second = topology.edge_face_indices[offsets[two] + 1]
+    cut = valid[first] & valid[second] & (np.einsum("ij,ij->i", normal[first], normal[second]) < FEATURE_EDGE_COSINE)
+    feature = np.zeros(offsets.shape[0] - 1, dtype=bool)
+    feature[two[cut]] = True
+    return feature
+
+
+def _face_panels(topology: MeshTopology, object_ids: np.ndarray, cut: np.ndarray | None = None) -> np.ndarray:
+    """Smallest face id of each face's panel (faces of one object connected through shared edges, not
+    through the edges marked in ``cut``).
 
     Vectorised union-find: every round hooks each tree root onto the smallest root it shares an
     edge with (roots only ever point to smaller ids, so no cycles form), then compresses paths by
@@ -83,6 +118,9 @@ def _face_panels(topology: MeshTopology, object_ids: np.ndarray) -> np.ndarray:
     offsets = topology.edge_face_offsets.astype(np.int64)
     slot_face = topology.edge_face_indices.astype(np.int64)
     slot_edge = np.repeat(np.arange(offsets.shape[0] - 1, dtype=np.int64), np.diff(offsets))
+    if cut is not None:
+        linkable = ~cut[slot_edge]
+        slot_face, slot_edge = slot_face[linkable], slot_edge[linkable]
     slot_object = object_ids[slot_face]
     order = np.lexsort((slot_object, slot_edge))  # edge-major, then object: same-object faces adjacent
     edge_s, object_s, face_s = slot_edge[order], slot_object[order], slot_face[order]
@@ -516,7 +554,8 @@ class MaterialBvh:
 
     @classmethod
     def build(cls, faces: Any, material: Any, object_ids: Any, topology: MeshTopology, device: Any = None,
-              rigid_objects: Iterable[int] = frozenset(), stitches: Any = None) -> MaterialBvh:
+              rigid_objects: Iterable[int] = frozenset(), stitches: Any = None,
+              feature_shape: Any = None) -> MaterialBvh:
         """Build the hierarchy and its contours on the host, then upload it to ``device``.
 
         Args:
@@ -532,6 +571,10 @@ class MaterialBvh:
                 edges whose ends are welded by stitches with r = 0 or 1 join their panels into one sewn
                 component, and count as interior edges of the nodes holding both sides (docs/bvh.md,
                 "Sewn panels").
+            feature_shape: optional (vertex_count, 3) positions of the shape that ``material`` embeds (a
+                mesh without rest coordinates, or with a 3-D rest shape that is not flat): panels are
+                also cut at its feature edges (:data:`FEATURE_EDGE_COSINE`). Leave it out for flat rest
+                or UV coordinates, whose panels are the pattern's.
 
         Returns:
             The hierarchy. Host cost: O(m log m) per depth, O(m log^2 m) in all.
@@ -546,7 +589,14 @@ class MaterialBvh:
         rows = None if stitches is None else check_stitches(stitches, coords.shape[0], "argument")
         seams = _seam_matches(tris, topology, objects, rows)
         geometry = _face_geometry(tris, coords)
-        panel_root = _face_panels(topology, objects)
+        cut = None
+        if feature_shape is not None:
+            shape = np.asarray(feature_shape, dtype=np.float64)
+            if shape.shape != (coords.shape[0], 3) or not np.all(np.isfinite(shape)):
+                raise InputError("argument", "feature_shape", f"has shape {shape.shape} or non-finite values",
+                                 f"pass ({coords.shape[0]}, 3) finite positions, or None")
+            cut = _feature_edges(tris.astype(np.int64), shape, topology)
+        panel_root = _face_panels(topology, objects, cut)
         _, panel_of_face = np.unique(panel_root, return_inverse=True)
         # The cuts see each panel turned so that its mesh lines run along the axes (panel_alignment).
         split_geometry = _corner_geometry(aligned_face_corners(tris, coords, panel_of_face))

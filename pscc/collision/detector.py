@@ -242,8 +242,11 @@ class CollisionDetector:
             # distance along the surface, not in a 3-D shape where folded layers would share nodes
             # (pscc.collision.intrinsic.bvh_material).
             material = bvh_material(mesh.faces, mesh.rest, mesh.vertices)
+            # A 3-D shape (the first positions, or a 3-D rest shape) is cut into panels at its feature edges
+            # too (bvh.FEATURE_EDGE_COSINE); 2-D rest coordinates keep the pattern's panels.
+            shape = mesh.vertices if mesh.rest is None else (mesh.rest if mesh.rest.shape[1] == 3 else None)
             self.bvh = MaterialBvh.build(mesh.faces, material, mesh.object_ids, self.topology, device,
-                                         self._rigid_objects, self._stitches)
+                                         self._rigid_objects, self._stitches, feature_shape=shape)
             self.front = NormalConeFront(self.bvh, self._faces, device, self._shrink_interval)
             self.front.lend_scratch(self._front_scratch_source())
 

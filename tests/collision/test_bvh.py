@@ -542,3 +542,54 @@ def test_object_ids_outside_int32_are_refused(bad: int) -> None:
         MaterialBvh.build(faces, rest, ids, topology)
     assert (caught.value.source, caught.value.field) == ("argument", "object_ids")
     assert f"has object id {bad}, outside [0, 2147483647]" in caught.value.problem
+
+
+def _capped_cylinder(sections: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cylinder whose flat caps are fans of slivers around their centres (as exporters write them)."""
+    import trimesh
+
+    mesh = trimesh.creation.cylinder(radius=1.0, height=0.2, sections=sections)
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32)
+
+
+def test_feature_edges_cut_panels_of_an_embedded_shape() -> None:
+    """With ``feature_shape``, a cylinder's two caps and its wall are three panels (the rim edges are 90
+    degrees sharp), each cap a subtree whose root covers the whole cap; without it, one panel. Its 2-D
+    rest coordinates would keep the pattern's panels: nothing is cut when no shape is given."""
+    from pscc.collision.intrinsic import bvh_material
+
+    vertices, faces = _capped_cylinder()
+    topology = MeshTopology.from_faces(faces, vertices.shape[0])
+    material = bvh_material(faces, None, vertices)
+    objects = np.zeros(faces.shape[0], dtype=np.int64)
+    plain = MaterialBvh.build(faces, material, objects, topology)
+    cut = MaterialBvh.build(faces, material, objects, topology, feature_shape=vertices)
+    assert np.unique(plain.face_panel).size == 1
+    assert np.unique(cut.face_panel).size == 3
+    normal = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    cap = np.abs(normal[:, 2]) > 0.5 * np.linalg.norm(normal, axis=1)
+    # Every panel is all cap (of one side) or all wall, and each cap is the range of one testable node.
+    for panel in np.unique(cut.face_panel):
+        members = np.flatnonzero(cut.face_panel == panel)
+        assert cap[members].all() or not cap[members].any()
+        if cap[members].all():
+            covering = [node for node in range(cut.node_count)
+                        if set(cut.faces_of(node).tolist()) == set(members.tolist())]
+            assert covering and cut.testable[covering[0]]
+    with pytest.raises(InputError, match="feature_shape"):
+        MaterialBvh.build(faces, material, objects, topology, feature_shape=vertices[:-1])
+
+
+def test_feature_edges_shrink_the_front_and_keep_the_dcd_contract() -> None:
+    """pscc's detector on the cylinder without rest coordinates: its front covers each cap with one node
+    (6 nodes at 64 sections, 147 without the cut), and its contacts are brute force's less only pairs inside one
+    front node or of neighbouring faces certified apart (the contract of tests/collision/test_pscc.py)."""
+    from tests.collision.test_pscc import _check_dcd_contract, _detectors
+
+    vertices, faces = _capped_cylinder()
+    x = vertices.astype(np.float32)
+    detectors = _detectors(faces)
+    thickness = 0.02
+    _check_dcd_contract(faces, x, thickness, detectors)
+    front = detectors["pscc"].broad_phase_stats()["front_size"]
+    assert front <= 16, front
