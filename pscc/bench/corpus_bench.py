@@ -404,7 +404,8 @@ CORPUS_ABOUT: str = (
     "Newton's shipped `unisex_shirt.usd`; then, added as a check after those had been tuned on, later "
     "moments of the two twisting scenes (denser tangles), Newton's shipped `bunny.usd` and `bear.usd` "
     "(closed surfaces), and its two CAD assemblies `rj45_plug.usd` and `crazyflie.usd` (rigid parts, one object "
-    "per mesh; at their radius, walls thinner than it and touching parts make many true contacts). DCD at each "
+    "per mesh; at their radius, walls thinner than it and touching parts make many true contacts), and its "
+    "`axis_cube.usda`, a cube of long slivers. DCD at each "
     "frame's own contact radius: a paper scene's cloth thickness, a Newton "
     "example's self-contact margin, half the median edge length for a shipped mesh (no radius of its own). "
     "`python -m pscc.bench --frames FILE ...` benches frames of your own the same way (README).")

@@ -571,10 +571,11 @@ class MaterialBvh:
                 edges whose ends are welded by stitches with r = 0 or 1 join their panels into one sewn
                 component, and count as interior edges of the nodes holding both sides (docs/bvh.md,
                 "Sewn panels").
-            feature_shape: optional (vertex_count, 3) positions of the shape that ``material`` embeds (a
-                mesh without rest coordinates, or with a 3-D rest shape that is not flat): panels are
-                also cut at its feature edges (:data:`FEATURE_EDGE_COSINE`). Leave it out for flat rest
-                or UV coordinates, whose panels are the pattern's.
+            feature_shape: optional (vertex_count, 3) positions of the mesh's 3-D shape (the detector
+                passes the first positions of a mesh without rest coordinates, or a 3-D rest shape):
+                panels are also cut at its feature edges (:data:`FEATURE_EDGE_COSINE`). Leave it out for
+                2-D rest or UV coordinates, whose panels are the pattern's. A flat shape has no feature
+                edges unless its faces' orientations disagree.
 
         Returns:
             The hierarchy. Host cost: O(m log m) per depth, O(m log^2 m) in all.
