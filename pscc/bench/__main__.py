@@ -29,7 +29,6 @@ Timings are the median of repeats after a warm-up run that compiles and loads th
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -191,7 +190,7 @@ def write_report(results: dict[str, Any], out: Path) -> None:
         lines += device_path.report(results["device_path"])
     if results.get("garments"):
         lines += garments.report(results["garments"])
-    out.write_text("\n".join(lines))
+    write_text_atomic(out, "\n".join(lines), field="--out")
 
 
 def _detector_lines(results: dict[str, Any], out: Path) -> list[str]:
@@ -312,6 +311,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.frames is not None:
         return _bench_frames(args)
+    out = Path(args.out or "BENCHMARKS.md")
+    try:  # before anything is measured: a bad report path ends the run at once, with exit 2
+        _check_report_path(out, "BENCHMARKS.md")
+    except PsccError as exc:
+        print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
+        return 2
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
     device = wp.get_device(args.device)
@@ -356,9 +361,12 @@ def main(argv: list[str] | None = None) -> int:
         cases = garments.QUICK_CASES if args.garments == "quick" else garments.CASES
         with tqdm(desc="garments", unit="frame", leave=False) as bar:
             results["garments"] = garments.run(cases, device.alias, _progress(bar))
-    out = Path(args.out or "BENCHMARKS.md")
-    out.with_suffix(".json").write_text(json.dumps(results, indent=2))
-    write_report(results, out)
+    try:
+        write_json_atomic(out.with_suffix(".json"), results, field="--out")
+        write_report(results, out)
+    except PsccError as exc:
+        print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
+        return 2
     print(f"wrote {out} and {out.with_suffix('.json')}")
     return 0
 
@@ -370,14 +378,23 @@ def _environment(device: Any, repeats: int) -> dict[str, Any]:
             "warp": wp.__version__, "python": platform.python_version(), "repeats": repeats}
 
 
+def _check_report_path(out: Path, example: str) -> None:
+    """Refuse a report path that is a folder or not a Markdown file (its folder is made when it is written).
+
+    Raises:
+        InputError: naming ``--out`` and the fix.
+    """
+    if out.is_dir() or out.suffix.lower() != ".md":
+        raise InputError(str(out), "--out", "is a folder" if out.is_dir() else "the report must be a .md file",
+                         f"name a Markdown file, e.g. --out {example}")
+
+
 def _bench_frames(args: argparse.Namespace) -> int:
     """``--frames``: read every file first (a bad file or output path ends the run with exit 2 before anything
     is measured or written), bench them as the corpus, and write only that section."""
     out = Path(args.out or DEFAULT_FRAMES_REPORT)
     try:
-        if out.is_dir() or out.suffix.lower() != ".md":
-            raise InputError(str(out), "--out", "is a folder" if out.is_dir() else "the report must be a .md file",
-                             "name a Markdown file, e.g. --out frames.md")
+        _check_report_path(out, "frames.md")
         frames = user_frames.load_user_frames(args.frames, args.frame_radius, args.usd_time)
     except PsccError as exc:
         print(f"pscc bench: error: {one_line(exc)}", file=sys.stderr)
