@@ -96,6 +96,7 @@ defaults, buffer limits and :class:`SpatialHashStats` live in
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -318,7 +319,7 @@ class SpatialHash:
         else:
             self.faces = wp.zeros(1, dtype=wp.vec3i, device=self.device)
         dev = self.device
-        chunks = max(1, min(SCENE_CHUNKS, m))
+        chunks = max(1, min(SCENE_CHUNKS, math.isqrt(max(m, 1) - 1) + 1))  # about sqrt(m): SCENE_CHUNKS
         self._chunk_size = max(1, -(-m // chunks))
         self._chunk_count = max(1, -(-m // self._chunk_size))
         self.chunk_lower = wp.empty(self._chunk_count, dtype=wp.vec3, device=dev)
@@ -957,8 +958,7 @@ class SpatialHash:
             tables, self.group_mask, slab, check_keys, self.row_count, self.row_end, self.info, lanes],
             outputs=[self.row_span, self.row_work], device=dev)
         self._scan(self.row_work, self.row_scan, inclusive=True)
-        wp.launch(mask_kernels._write_code_masks, dim=mask_kernels.block_count(n), inputs=[self.entry_code, self.info],
-                  outputs=[self.code_masks], device=dev)
+        mask_kernels.write_code_masks(self.entry_code, self.info, self.code_masks, n, self.code_mask_min_run, dev)
 
     def _test_pairs(self, face_lower: wp.array, face_upper: wp.array, diagonals: kernels.DiagonalArgs,
                     shared: shared_vertex.SharedVertexArgs, node_bits: int) -> None:

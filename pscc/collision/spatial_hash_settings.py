@@ -123,7 +123,10 @@ slot and the tests of its cell). Wide faces are used only when they are at most 
 ``WIDE_FACE_SHARE`` (and ``max_wide_faces``)."""
 
 SCENE_CHUNKS: int = 1024
-"""Threads of the scene-bounds reduction (each folds a chunk of faces)."""
+"""Most threads of the scene-bounds reduction (each folds a chunk of faces). A call uses about
+sqrt(face_count) chunks of about as many faces, at most this many: the chunk pass and the single thread
+that then folds the chunks (scene bounds, long and wide faces) loop about equally long. On an H200 the
+single thread's loop over 999 chunks of a 5K-face frame took 0.16 ms of a 0.86 ms replayed detection."""
 
 CODE_MASK_MIN_RUN: int = 4
 """Entries of a row segment (entry a against consecutive entries of later groups of its cell) from which

@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 from pscc.collision._code_mask_kernels import (
     ENTRIES_PER_BLOCK,
     WORDS_PER_BLOCK,
-    _write_code_masks,
     block_count,
     code_mask_query,
     lowest_bit,
+    write_code_masks,
 )
 from pscc.collision._hash_row_kernels import cell_codes_overlap, code_minuend, code_subtrahend, codes_hold_token
-from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, INFO_LIVE_ENTRIES, INFO_SIZE
+from pscc.collision._spatial_hash_kernels import INFO_CELL_CODES, INFO_LIVE_ENTRIES, INFO_SIZE, INFO_TEST_CHUNK
 from pscc.collision.detector import CollisionDetector
 from pscc.collision.spatial_hash import SpatialHash
 from pscc.errors import InputError
@@ -72,12 +72,14 @@ def _random_codes(rng: np.random.Generator, n: int) -> np.ndarray:
     return code.astype(np.uint32)
 
 
+@pytest.mark.parametrize("per_word", [False, True], ids=["per-block", "per-word"])
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), live=st.integers(1, 300))
-def test_masks_give_exactly_the_code_test(seed: int, live: int) -> None:
+def test_masks_give_exactly_the_code_test(per_word: bool, seed: int, live: int) -> None:
     """Random codes in several blocks (the last one part full, and a slot capacity past the live
     entries): for every entry pair the masks' bit is the code test's answer, and the masks never set a
-    bit of a slot past the live entries."""
+    bit of a slot past the live entries; the GPU's per-word form (forced here on the CPU) writes the
+    CPU's per-block words, bit for bit."""
     rng = np.random.default_rng(seed)
     capacity = live + 70
     codes = np.zeros(capacity, dtype=np.uint32)
@@ -86,11 +88,15 @@ def test_masks_give_exactly_the_code_test(seed: int, live: int) -> None:
     info = np.zeros(INFO_SIZE, dtype=np.int64)
     info[INFO_LIVE_ENTRIES] = live
     info[INFO_CELL_CODES] = 1
+    info[INFO_TEST_CHUNK] = 64  # the CPU's tests per thread: runs through the masks
     blocks = block_count(capacity)
     masks = wp.full(blocks * WORDS_PER_BLOCK, value=wp.uint64(0xDEADBEEF), dtype=wp.uint64, device=DEVICE)
     codes_wp = wp.array(codes, dtype=wp.uint32, device=DEVICE)
-    wp.launch(_write_code_masks, dim=blocks, inputs=[codes_wp, wp.array(info, dtype=wp.int64, device=DEVICE)],
-              outputs=[masks], device=DEVICE)
+    info_wp = wp.array(info, dtype=wp.int64, device=DEVICE)
+    write_code_masks(codes_wp, info_wp, masks, capacity, 4, wp.get_device(DEVICE), per_word=per_word)
+    other = wp.full(blocks * WORDS_PER_BLOCK, value=wp.uint64(0xDEADBEEF), dtype=wp.uint64, device=DEVICE)
+    write_code_masks(codes_wp, info_wp, other, capacity, 4, wp.get_device(DEVICE), per_word=not per_word)
+    np.testing.assert_array_equal(masks.numpy(), other.numpy())
     out = wp.zeros(live * live, dtype=wp.int32, device=DEVICE)
     wp.launch(_compare_queries, dim=live, inputs=[codes_wp, masks, live], outputs=[out], device=DEVICE)
     got = out.numpy().reshape(live, live)
@@ -106,15 +112,25 @@ def test_masks_give_exactly_the_code_test(seed: int, live: int) -> None:
         assert not np.any(words[last_block] & stale)
 
 
-def test_masks_are_not_written_without_codes() -> None:
-    """A call that reads no cell codes leaves the masks alone (the kernel returns at once)."""
+@pytest.mark.parametrize("per_word", [False, True], ids=["per-block", "per-word"])
+@pytest.mark.parametrize("unread", ["no codes", "short chunks"])
+def test_masks_are_not_written_where_nothing_reads_them(per_word: bool, unread: str) -> None:
+    """A call that reads no cell codes, or whose test threads run chunks shorter than the minimum run
+    through the masks (a GPU's one BV test per thread), leaves the masks alone; with codes and long
+    chunks the same call writes them."""
     info = np.zeros(INFO_SIZE, dtype=np.int64)
     info[INFO_LIVE_ENTRIES] = 10
+    info[INFO_CELL_CODES] = 0 if unread == "no codes" else 1
+    info[INFO_TEST_CHUNK] = 64 if unread == "no codes" else 3
+    codes = wp.array(_random_codes(np.random.default_rng(1), 10), dtype=wp.uint32, device=DEVICE)
     masks = wp.full(WORDS_PER_BLOCK, value=wp.uint64(7), dtype=wp.uint64, device=DEVICE)
-    wp.launch(_write_code_masks, dim=1, inputs=[wp.zeros(10, dtype=wp.uint32, device=DEVICE),
-                                                wp.array(info, dtype=wp.int64, device=DEVICE)],
-              outputs=[masks], device=DEVICE)
+    write_code_masks(codes, wp.array(info, dtype=wp.int64, device=DEVICE), masks, 10, 4, wp.get_device(DEVICE),
+                     per_word=per_word)
     assert np.all(masks.numpy() == 7)
+    info[INFO_CELL_CODES], info[INFO_TEST_CHUNK] = 1, 4
+    write_code_masks(codes, wp.array(info, dtype=wp.int64, device=DEVICE), masks, 10, 4, wp.get_device(DEVICE),
+                     per_word=per_word)
+    assert not np.all(masks.numpy() == 7)
 
 
 def test_lowest_bit() -> None:
