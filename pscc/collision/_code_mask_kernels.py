@@ -121,8 +121,9 @@ def _write_code_mask_words(
     """One thread per mask word (96 per block of 64 entry slots): the same words as
     :func:`_write_code_masks`, each ORed from the block's codes in registers and written once. On a GPU
     that thread's loop reads codes that its block's other 95 threads read at the same time, where
-    :func:`_write_code_masks` reads and writes global words one after another (0.14 ms on an H200
-    for a 5K-face frame)."""
+    :func:`_write_code_masks` reads and writes global words one after another (0.14 ms on an H200 for a
+    5K-face frame, where nothing read them; this form has not been timed on its own: a GPU call writes
+    masks only past about 4M BV tests)."""
     word = wp.tid()
     block = word // _WORDS_PER_BLOCK
     slot = word - block * _WORDS_PER_BLOCK
