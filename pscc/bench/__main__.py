@@ -255,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run every benchmark and write the report; return the exit status."""
     parser = argparse.ArgumentParser(description="Run the pscc benchmarks and write BENCHMARKS.md.")
     parser.add_argument("--out", default=None,
-                        help=f"report path (default BENCHMARKS.md; with --frames {DEFAULT_FRAMES_REPORT})")
+                        help=f"report path, a .md file; its folder is made, and the raw numbers go beside it as .json "
+                        f"(default BENCHMARKS.md; with --frames {DEFAULT_FRAMES_REPORT})")
     parser.add_argument("--device", default=None, help="Warp device (default: Warp's default)")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats per measurement")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 4000, 16000],
