@@ -42,3 +42,20 @@ def test_jobs_below_one_are_refused() -> None:
     with pytest.raises(SystemExit) as exc:
         compile_cuda.main(["--jobs", "0"])
     assert exc.value.code == 2
+
+
+def test_a_kernel_cache_is_filled_in_warps_layout(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """--cache: the module's cubin and metadata land where Warp looks for them under WARP_CACHE_PATH."""
+    monkeypatch.setattr(compile_cuda, "kernel_modules", lambda: ["pscc.sim.pcg"])
+    assert compile_cuda.main(["--arch", "90", "--jobs", "1", "--cache", str(tmp_path)]) == 0
+    (version,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    (module,) = [p for p in version.iterdir() if p.name.startswith("wp_pscc.sim.pcg_")]
+    assert (module / f"{module.name}.sm90.cubin").stat().st_size > 0
+    assert (module / f"{module.name}.meta").is_file()
+
+
+def test_out_and_cache_are_exclusive(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit) as exc:
+        compile_cuda.main(["--out", str(tmp_path), "--cache", str(tmp_path)])
+    assert exc.value.code == 2
+
