@@ -1,6 +1,6 @@
 """`tools/profile_detection.py`, the replay profile behind BENCHMARKS-cuda.md's per-kernel figures: it
-times both methods on a frame file, takes the radius from the median edge when none is given, and ends
-with exit 2 naming a missing frame file."""
+reads frames as the bench's --frames does, times both methods on them, and ends with exit 2 naming a
+missing frame file or a bad radius."""
 
 from __future__ import annotations
 
@@ -32,8 +32,11 @@ def test_both_methods_are_timed_on_a_frame_file(tmp_path: Path, capsys: pytest.C
     assert all("replay + counter read" in line and " ms" in line for line in lines)
 
 
-def test_a_missing_frame_file_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_missing_frame_file_or_a_bad_radius_is_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "nowhere.npz"
     assert profile_detection.main(["--device", "cpu", f"{missing}:0.01"]) == 2
     message = capsys.readouterr().err
     assert "nowhere.npz" in message and "Fix:" in message
+    assert profile_detection.main(["--device", "cpu", f"{missing}:wide"]) == 2
+    message = capsys.readouterr().err
+    assert "'wide'" in message and "FILE[:RADIUS[:norest]]" in message

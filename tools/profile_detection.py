@@ -1,6 +1,7 @@
 """Where a recorded detection spends its time: graph replays timed, and one eager call's GPU activities.
 
-For each frame (a corpus cache file, see ``pscc.bench.corpus``) and each method (``pscc``,
+For each frame (any file ``python -m pscc.bench --frames`` reads: OBJ, PLY, NPZ, USD, or a cached corpus
+frame; read by :func:`pscc.bench.user_frames.load_user_frame`, with its errors) and each method (``pscc``,
 ``spatial-hash``): a DCD detection at the frame's radius is recorded once
 (:class:`pscc.collision.recorded.RecordedDetection`), replayed ``--replays`` times back to back (the
 seconds per replay, with and without the counter read a caller needs), and on a CUDA device one more
@@ -16,11 +17,12 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
-import numpy as np
 import warp as wp
 
 DEFAULT_FRAMES = ("bench-output/corpus/paper-twisting-f48-v1.npz:0.002",
@@ -36,25 +38,20 @@ def parse_frame(spec: str) -> tuple[Path, float | None, bool]:
     return Path(parts[0]), radius, not (len(parts) > 2 and parts[2] == "norest")
 
 
-def _median_half_edge(x: np.ndarray, faces: np.ndarray) -> float:
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    return 0.5 * float(np.median(np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)))
+def profile(frame: Any, device: str, replays: int, top: int) -> None:
+    """Print one frame's replay times per method and, on CUDA, the eager call's largest activities.
 
-
-def profile(path: Path, radius: float | None, use_rest: bool, device: str, replays: int, top: int) -> None:
-    """Print one frame's replay times per method and, on CUDA, the eager call's largest activities."""
+    Args:
+        frame: a :class:`pscc.bench.corpus.CorpusFrame` (its rest coordinates are used when it has them).
+    """
     from pscc.collision.detector import CollisionDetector
     from pscc.collision.recorded import RecordedDetection
 
-    data = np.load(path)
-    faces, x = data["faces"], data["positions"]
-    rest = data["rest"] if use_rest and "rest" in data else None
-    object_ids = data["object_ids"] if "object_ids" in data else None
-    radius = _median_half_edge(x, faces) if radius is None else radius
     for method in ("pscc", "spatial-hash"):
-        detector = CollisionDetector(faces, method=method, rest=rest, object_ids=object_ids, device=device)
-        positions = wp.array(x, dtype=wp.vec3, device=device)
-        recorded = RecordedDetection(detector, positions, thickness=radius)
+        detector = CollisionDetector(frame.faces, method=method, rest=frame.rest, object_ids=frame.object_ids,
+                                     device=device)
+        positions = wp.array(frame.positions, dtype=wp.vec3, device=device)
+        recorded = RecordedDetection(detector, positions, thickness=frame.radius)
         for _ in range(5):
             recorded.replay()
         wp.synchronize_device(device)
@@ -67,14 +64,14 @@ def profile(path: Path, radius: float | None, use_rest: bool, device: str, repla
         for _ in range(replays):
             recorded.replay()
         checked = (time.perf_counter() - started) / replays * 1e3
-        line = f"{path.stem} {method}: replay {bare:.3f} ms, replay + counter read {checked:.3f} ms"
+        line = f"{frame.name} {method}: replay {bare:.3f} ms, replay + counter read {checked:.3f} ms"
         if not wp.get_device(device).is_cuda:
             print(line, flush=True)
             continue
-        detector.detect(positions, thickness=radius)
+        detector.detect(positions, thickness=frame.radius)
         wp.synchronize_device(device)
         wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-        detector.detect(positions, thickness=radius)
+        detector.detect(positions, thickness=frame.radius)
         activities = wp.timing_end()
         totals: dict[str, list[float]] = collections.defaultdict(lambda: [0, 0.0])
         for activity in activities:
@@ -94,18 +91,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--replays", type=int, default=40, help="timed graph replays per method")
     parser.add_argument("--top", type=int, default=14, help="activities listed per pscc call (CUDA only)")
     args = parser.parse_args(argv)
-    frames = [parse_frame(spec) for spec in args.frames]
-    missing = [str(path) for path, _, _ in frames if not path.is_file()]
-    if missing:
-        print(f"profile_detection: error: no such frame file: {', '.join(missing)}. Fix: run the bench's corpus "
-              "once (python -m pscc.bench --corpus quick) or name .npz frames with 'positions' and 'faces'.",
-              file=sys.stderr)
+    from pscc.bench.user_frames import load_user_frame
+    from pscc.errors import PsccError, one_line
+
+    frames = []
+    try:  # every file read (and checked) before anything is measured
+        for spec in args.frames:
+            path, radius, use_rest = parse_frame(spec)
+            frame = load_user_frame(str(path), radius)
+            frames.append(frame if use_rest else dataclasses.replace(frame, rest=None))
+    except (PsccError, ValueError) as exc:
+        message = one_line(exc) if isinstance(exc, PsccError) else f"{exc}. Fix: write FILE[:RADIUS[:norest]]"
+        print(f"profile_detection: error: {message}", file=sys.stderr)
         return 2
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
     device = wp.get_device(args.device).alias
-    for path, radius, use_rest in frames:
-        profile(path, radius, use_rest, device, max(1, args.replays), args.top)
+    for frame in frames:
+        profile(frame, device, max(1, args.replays), args.top)
     return 0
 
 
