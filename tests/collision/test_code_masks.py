@@ -141,10 +141,13 @@ def test_lowest_bit() -> None:
     np.testing.assert_array_equal(out.numpy(), [0, 1, 3, 40, 5, 2, 63])
 
 
-def _pairs(lower, upper, node, cell_size, min_run: int) -> tuple[np.ndarray, int]:
-    hash_ = SpatialHash(lower.shape[0], DEVICE, cell_code_min_tests=0, code_mask_min_run=min_run)
+def _pairs(lower, upper, node, cell_size, min_run: int, test_threads: int | None = None) -> tuple[np.ndarray, int]:
+    hash_ = SpatialHash(lower.shape[0], DEVICE, cell_code_min_tests=0, code_mask_min_run=min_run,
+                        test_threads=test_threads, tests_per_thread=None if test_threads is None else 1)
     hash_.find_pairs(wp.array(lower, dtype=wp.vec3, device=DEVICE), wp.array(upper, dtype=wp.vec3, device=DEVICE),
                      wp.array(node, dtype=wp.int32, device=DEVICE), cell_size)
+    if test_threads is not None:  # the GPU's shape: one BV test per thread, so runs of one entry
+        assert int(hash_.info.numpy()[INFO_TEST_CHUNK]) == 1
     return hash_.pairs_numpy(), int(hash_.info.numpy()[INFO_CELL_CODES])
 
 
@@ -152,7 +155,7 @@ def _pairs(lower, upper, node, cell_size, min_run: int) -> tuple[np.ndarray, int
 def test_hash_pairs_are_the_same_with_and_without_masks(layout: str) -> None:
     """Cells of hundreds of entries (blocks that span cells and cells that span blocks), boxes touching on
     cell faces, points on cell corners: brute force's box pairs with the masks on every run (1), on runs of
-    at least 8, and never."""
+    at least 8, and never; and with a GPU's one BV test per thread, masks skipped or read entry by entry."""
     rng = np.random.default_rng(3)
     m = 900
     if layout == "crowded":
@@ -170,8 +173,10 @@ def test_hash_pairs_are_the_same_with_and_without_masks(layout: str) -> None:
     node = rng.integers(0, m // 4, size=m).astype(np.int32)
     expected = _reference(lower, upper, node)
     assert expected.shape[0] > 1000
-    for min_run in (1, 8, 2**31 - 1):
-        pairs, used = _pairs(lower, upper, node, cell_size, min_run)
+    # Last two: a GPU's launch shape (a thread per BV test), where a minimum run of 4 leaves the masks
+    # unwritten and unread, and a minimum run of 1 writes them and reads them one entry at a time.
+    for min_run, threads in ((1, None), (8, None), (2**31 - 1, None), (4, 2**20), (1, 2**20)):
+        pairs, used = _pairs(lower, upper, node, cell_size, min_run, threads)
         assert used == 1
         np.testing.assert_array_equal(pairs, expected)
 
