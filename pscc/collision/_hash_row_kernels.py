@@ -55,6 +55,8 @@ from pscc.collision.shared_vertex import (
 from pscc.geometry.aabb import boxes_overlap
 from pscc.geometry.dop import diagonal_slabs_overlap, vec10
 
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def _project_group(
