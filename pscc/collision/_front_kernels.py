@@ -77,9 +77,15 @@ def _node_passes(args: NodeTestArgs, node: int) -> bool:
     reference = bvh.reference_vertex[node]
     o0 = wp.vec3(0.0, 0.0, 0.0)
     o1 = wp.vec3(0.0, 0.0, 0.0)
+    reference_face = bvh.reference_face[node]
     if reference >= 0:
         o0 = args.positions_t0[reference]
         o1 = args.positions_t1[reference]
+    elif reference_face >= 0:
+        # The centroid of a face chosen at build time (pscc.collision.reference_points).
+        f = args.faces[reference_face]
+        o0 = (args.positions_t0[f[0]] + args.positions_t0[f[1]] + args.positions_t0[f[2]]) / 3.0
+        o1 = (args.positions_t1[f[0]] + args.positions_t1[f[1]] + args.positions_t1[f[2]]) / 3.0
     else:
         for i in range(begin, end):
             o0 += args.positions_t0[bvh.contour_vertices[i]]

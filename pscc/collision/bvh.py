@@ -15,7 +15,9 @@ import numpy as np
 import warp as wp
 
 from pscc._checks import INT32_MAX, as_numpy, check_object_ids
+from pscc.collision.connected_splits import connected_cut, face_adjacency, face_links, split_pieces, union_roots
 from pscc.collision.panel_alignment import aligned_face_corners
+from pscc.collision.reference_points import reference_faces
 from pscc.errors import InputError
 from pscc.mesh.mesh_data import MeshData, check_stitches
 from pscc.mesh.topology import MeshTopology
@@ -42,6 +44,7 @@ class MaterialBvhArrays:
     object_id: wp.array(dtype=wp.int32)
     testable: wp.array(dtype=wp.int32)
     reference_vertex: wp.array(dtype=wp.int32)
+    reference_face: wp.array(dtype=wp.int32)
     contour_offsets: wp.array(dtype=wp.int32)
     contour_vertices: wp.array(dtype=wp.int32)
     seam_offsets: wp.array(dtype=wp.int32)
@@ -108,12 +111,8 @@ def _feature_edges(faces: np.ndarray, shape: np.ndarray, topology: MeshTopology)
 
 def _face_panels(topology: MeshTopology, object_ids: np.ndarray, cut: np.ndarray | None = None) -> np.ndarray:
     """Smallest face id of each face's panel (faces of one object connected through shared edges, not
-    through the edges marked in ``cut``).
-
-    Vectorised union-find: every round hooks each tree root onto the smallest root it shares an
-    edge with (roots only ever point to smaller ids, so no cycles form), then compresses paths by
-    pointer jumping until every face points at its root.
-    """
+    through the edges marked in ``cut``), by the vectorised union-find
+    :func:`~pscc.collision.connected_splits.union_roots`."""
     m = object_ids.shape[0]
     offsets = topology.edge_face_offsets.astype(np.int64)
     slot_face = topology.edge_face_indices.astype(np.int64)
@@ -125,23 +124,7 @@ def _face_panels(topology: MeshTopology, object_ids: np.ndarray, cut: np.ndarray
     order = np.lexsort((slot_object, slot_edge))  # edge-major, then object: same-object faces adjacent
     edge_s, object_s, face_s = slot_edge[order], slot_object[order], slot_face[order]
     linked = (edge_s[1:] == edge_s[:-1]) & (object_s[1:] == object_s[:-1])
-    u, v = face_s[:-1][linked], face_s[1:][linked]
-
-    parent = np.arange(m, dtype=np.int64)
-    while u.size:
-        root_u, root_v = parent[u], parent[v]
-        low, high = np.minimum(root_u, root_v), np.maximum(root_u, root_v)
-        active = low != high
-        if not active.any():
-            break
-        u, v, low, high = u[active], v[active], low[active], high[active]  # settled links never matter again
-        np.minimum.at(parent, high, low)
-        while True:
-            grand = parent[parent]
-            if np.array_equal(grand, parent):
-                break
-            parent = grand
-    return parent
+    return union_roots(m, face_s[:-1][linked], face_s[1:][linked])
 
 
 def _seam_matches(faces: np.ndarray, topology: MeshTopology, object_ids: np.ndarray,
@@ -420,6 +403,8 @@ class MaterialBvh:
     panel                 (N,)        panel of the node's faces; -1 above the panel roots
     testable              (N,) bool   the contour is one closed loop of a connected patch (below)
     reference_vertex      (N,)        interior vertex nearest the patch centroid, or -1
+    reference_face        (N,)        without reference vertex: the face whose centroid is the contour
+                                      test's point (:mod:`pscc.collision.reference_points`), or -1
     contour_offsets       (N + 1,)    CSR offsets into ``contour_vertices``
     contour_vertices      (C,)        loop v_0 .. v_{k-1} of each testable node (edge v_{k-1} v_0 implied)
     component             (N,)        sewn component of the node's panels (one only), else -1
@@ -467,6 +452,7 @@ class MaterialBvh:
         self.panel: np.ndarray = host["panel"]
         self.testable: np.ndarray = host["testable"]
         self.reference_vertex: np.ndarray = host["reference_vertex"]
+        self.reference_face: np.ndarray = host["reference_face"]
         self.contour_offsets: np.ndarray = host["contour_offsets"]
         self.contour_vertices: np.ndarray = host["contour_vertices"]
         self.seam_offsets: np.ndarray = host["seam_offsets"]
@@ -601,8 +587,13 @@ class MaterialBvh:
         _, panel_of_face = np.unique(panel_root, return_inverse=True)
         # The cuts see each panel turned so that its mesh lines run along the axes (panel_alignment).
         split_geometry = _corner_geometry(aligned_face_corners(tris, coords, panel_of_face))
-        host = _build_tree(split_geometry, objects, topology, rigid, seams[0], panel_root)
+        # A 3-D shape (no rest coordinates, or a 3-D rest): its tessellation is not a pattern's, so the
+        # halves of a median cut may fall in pieces, and small patches may have no interior vertex.
+        shaped = feature_shape is not None
+        host = _build_tree(split_geometry, objects, topology, rigid, seams[0], panel_root, connect_halves=shaped)
         host.update(_build_contours(tris, coords, geometry, topology, host, seams))
+        host["reference_face"] = (reference_faces(tris, shape, host) if shaped
+                                  else np.full(host["left"].shape[0], -1, dtype=np.int64))
         host = {name: values.astype(np.int32) if values.dtype.kind in "iu" else values
                 for name, values in host.items()}
         return cls(host, device)
@@ -642,9 +633,50 @@ def _validate(faces: Any, material: Any, object_ids: Any, topology: MeshTopology
     return tris, coords, objects.astype(np.int64), rigid
 
 
+class _HalfConnector:
+    """The face links and adjacency :mod:`pscc.collision.connected_splits` needs, made on first use."""
+
+    def __init__(self, topology: MeshTopology, face_count: int) -> None:
+        self.topology = topology
+        self.face_count = face_count
+        self._links: tuple[np.ndarray, np.ndarray] | None = None
+        self._adjacency: Any = None
+
+    @property
+    def links(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._links is None:
+            self._links = face_links(self.topology)
+        return self._links
+
+    @property
+    def adjacency(self) -> Any:
+        if self._adjacency is None:
+            self._adjacency = face_adjacency(self.topology, self.face_count)
+        return self._adjacency
+
+
+def _connect_halves(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, median: np.ndarray,
+                    left_count: np.ndarray, splitter: _HalfConnector) -> None:
+    """Cut again along the surface (:func:`~pscc.collision.connected_splits.connected_cut`) the ``median``
+    nodes of one level whose cut leaves a half that is not edge-connected; ``face_order`` and ``left_count``
+    are updated in place for those a connected cut was found for."""
+    nodes = np.flatnonzero(median)
+    broken = split_pieces(face_order, begin[nodes], end[nodes], left_count[nodes], splitter.links,
+                          splitter.face_count)
+    for i in nodes[broken].tolist():
+        lo, hi = int(begin[i]), int(end[i])
+        order = connected_cut(face_order[lo:hi], splitter.adjacency)
+        if order is not None:
+            face_order[lo:hi] = order
+            left_count[i] = (hi - lo + 1) // 2
+
+
 def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topology: MeshTopology,
-                rigid: frozenset[int], partner_face: np.ndarray, panel_root: np.ndarray) -> dict[str, np.ndarray]:
-    """Top-down, level-by-level construction of the node arrays (see :class:`MaterialBvh`)."""
+                rigid: frozenset[int], partner_face: np.ndarray, panel_root: np.ndarray,
+                connect_halves: bool = False) -> dict[str, np.ndarray]:
+    """Top-down, level-by-level construction of the node arrays (see :class:`MaterialBvh`); with
+    ``connect_halves``, a median cut that leaves a half in pieces is cut again along the surface
+    (:mod:`pscc.collision.connected_splits`)."""
     centroid, lower, upper, _ = geometry
     m, dim = centroid.shape
 
@@ -688,6 +720,7 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
     root_objects = object_values[sequence_object[first_panel]]
     is_rigid_object = np.isin(root_objects, np.fromiter(rigid, dtype=np.int64, count=len(rigid)))
 
+    splitter = _HalfConnector(topology, m) if connect_halves else None
     seg = {"begin": panel_begin[plo], "end": panel_begin[phi], "plo": plo, "phi": phi,
            "rigid": is_rigid_object, "object": root_objects,
            "parent": np.full(plo.shape[0], -1, dtype=np.int64), "is_left": np.zeros(plo.shape[0], dtype=bool)}
@@ -706,6 +739,8 @@ def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topolo
         if median.any():
             median_count[median] = _split_ranges(face_order, seg["begin"][median], seg["end"][median],
                                                           centroid, lower, upper)
+            if splitter is not None:
+                _connect_halves(face_order, seg["begin"], seg["end"], median, median_count, splitter)
         split = multi | median
         panel_mid = (seg["plo"] + seg["phi"]) // 2
         face_mid = np.where(multi, panel_begin[panel_mid], seg["begin"] + median_count)

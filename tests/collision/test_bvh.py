@@ -99,8 +99,10 @@ def reference_node(faces: np.ndarray, material: np.ndarray, node_faces: list[int
     return testable, (loop if testable else []), vertices - set(loop), center
 
 
-def check_contours(bvh: MaterialBvh, faces: np.ndarray, material: np.ndarray) -> None:
-    """Every node's testability, loop and reference vertex against :func:`reference_node`."""
+def check_contours(bvh: MaterialBvh, faces: np.ndarray, material: np.ndarray, panels_cut: bool = False) -> None:
+    """Every node's testability, loop and reference vertex against :func:`reference_node`. With
+    ``panels_cut`` (a build with a feature shape, whose panels the reference does not know), nodes above
+    the panels must be untestable and are not compared."""
     material = np.asarray(material, dtype=np.float64)
     global_count: dict[tuple[int, int], int] = {}
     for face in faces.tolist():
@@ -120,6 +122,9 @@ def check_contours(bvh: MaterialBvh, faces: np.ndarray, material: np.ndarray) ->
             assert bvh.testable[node] and loop == faces[node_faces[0]].tolist()
             assert bvh.reference_vertex[node] == -1
             continue
+        if panels_cut and bvh.panel[node] < 0:
+            assert not bvh.testable[node] and loop == [], node
+            continue
         testable, expected, interior, center = reference_node(faces, material, node_faces, global_count)
         assert bool(bvh.testable[node]) == testable, node
         assert loop == expected, node
@@ -132,8 +137,10 @@ def check_contours(bvh: MaterialBvh, faces: np.ndarray, material: np.ndarray) ->
         assert distances[ref] <= min(distances.values()) * (1 + 1e-9) + 1e-12, node
 
 
-def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigid: set[int] = frozenset()) -> None:
-    """Structural invariants of the hierarchy (see the class docstring)."""
+def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigid: set[int] = frozenset(),
+               panels: np.ndarray | None = None) -> None:
+    """Structural invariants of the hierarchy (see the class docstring); ``panels``: the expected panel of
+    each face (default :func:`reference_panels`, for a build without a feature shape)."""
     m = faces.shape[0]
     n_nodes = bvh.node_count
     assert bvh.face_count == m
@@ -196,7 +203,7 @@ def check_tree(bvh: MaterialBvh, faces: np.ndarray, object_ids: np.ndarray, rigi
     assert bvh.level_count == int(bvh.depth.max()) + 1
 
     # Panels: the reference partition; a node holds one panel or whole panels only.
-    panels = np.array(reference_panels(faces, object_ids))
+    panels = np.array(reference_panels(faces, object_ids)) if panels is None else panels
     _, reference_index = np.unique(panels, return_inverse=True)
     _, our_index = np.unique(bvh.face_panel, return_inverse=True)
     pairs = set(zip(reference_index.tolist(), our_index.tolist(), strict=True))
@@ -442,8 +449,8 @@ def test_device_arrays(device: str) -> None:
     assert str(bvh.device) == device
     total = 0
     for name in ("left", "right", "parent", "depth", "face_begin", "face_end", "is_leaf", "is_rigid", "object_id",
-                 "testable", "reference_vertex", "contour_offsets", "contour_vertices", "face_order", "face_leaf",
-                 "level_offsets", "level_nodes", "seam_offsets"):
+                 "testable", "reference_vertex", "reference_face", "contour_offsets", "contour_vertices", "face_order",
+                 "face_leaf", "level_offsets", "level_nodes", "seam_offsets"):
         array = getattr(bvh.arrays, name)
         assert array.device == bvh.device and array.dtype == wp.int32
         assert np.array_equal(array.numpy(), getattr(bvh, name).astype(np.int32)), name
@@ -521,7 +528,8 @@ def test_sparse_object_ids_build_the_same_tree_in_small_memory() -> None:
     assert bvh.is_rigid[bvh.root_of(big)]
     rename = {0: 5, 1: 7, 2: big}
     for name in ("left", "right", "parent", "depth", "face_begin", "face_end", "is_leaf", "is_rigid", "panel",
-                 "testable", "reference_vertex", "contour_offsets", "contour_vertices", "face_order", "face_leaf"):
+                 "testable", "reference_vertex", "reference_face", "contour_offsets", "contour_vertices", "face_order",
+                 "face_leaf"):
         np.testing.assert_array_equal(getattr(bvh, name), getattr(reference, name), err_msg=name)
     assert [rename[o] for o in reference.object_id.tolist()] == bvh.object_id.tolist()
     assert bvh.roots.tolist() == reference.roots.tolist()

@@ -64,9 +64,11 @@ def test_without_rest_the_detector_culls_more_than_in_the_first_shape(monkeypatc
             detector.detect(mesh.vertices_end, thickness=radius)  # builds the BVH
         pairs[label] = detector.detect(mesh.vertices_end, thickness=radius).stats["triangle_pairs"]
     # Both certify the pairs that share a vertex (pscc.collision.shared_vertex); what the BVH's shape
-    # changes is the pairs across the surface: 6,246 against 6,914 here (16,904 against 26,176 with
-    # the vertex-sharing pairs, before they were certified).
-    assert pairs["intrinsic"] < 0.95 * pairs["first shape"], pairs
+    # changes is the pairs across the surface: 6,474 against 6,537 here. The first shape's tree mixes
+    # layers, so many of its median cuts left halves in pieces; since such cuts are made again along the
+    # surface (pscc.collision.connected_splits) it lost most of its gap: 7,145 pairs and a front of 1,147
+    # nodes before, 6,537 and 387 after (the intrinsic tree: 6,496 and 323, then 6,474 and 280).
+    assert pairs["intrinsic"] < pairs["first shape"], pairs
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
