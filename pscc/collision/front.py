@@ -260,8 +260,8 @@ class NormalConeFront:
         """Restore :meth:`state_dict` output (from a front over the same BVH) into the device state.
 
         Raises:
-            InputError: node ids outside this BVH, more nodes than it can hold, or a negative
-                call counter.
+            InputError: node ids outside this BVH, more nodes than it can hold, nodes that are not a cut
+                of it (their face ranges do not cover every face once), or a negative call counter.
 
         Allocates: no (uploads into the existing buffers). Capture-safe: no.
         """
@@ -270,6 +270,19 @@ class NormalConeFront:
         if nodes.size == 0 or nodes.size > n or nodes.min() < 0 or nodes.max() >= n:
             raise InputError("checkpoint", "front", f"{nodes.size} node ids do not fit a BVH of {n} nodes",
                              "restore a checkpoint of the same scene")
+        # A front must be a cut: its nodes' face ranges tile the faces. A checkpoint of another scene or of a
+        # pscc whose tree was built otherwise (node ids in range, other nodes) would leave faces out of every
+        # node or in two, and their pairs untested.
+        begin = self.bvh.face_begin[nodes].astype(np.int64)
+        end = self.bvh.face_end[nodes].astype(np.int64)
+        order = np.argsort(begin, kind="stable")
+        begin, end = begin[order], end[order]
+        if begin[0] != 0 or end[-1] != self.bvh.face_count or np.any(begin[1:] != end[:-1]):
+            raise InputError("checkpoint", "front", f"its {nodes.size} nodes do not cover each of the "
+                             f"{self.bvh.face_count} faces once (a checkpoint of another scene, or of a pscc "
+                             "that built this scene's tree otherwise)",
+                             "restore a checkpoint written by this version of pscc for this scene, or start the run "
+                             "again")
         calls = int(np.asarray(state["calls"]).reshape(-1)[0])
         if calls < 0:
             raise InputError("checkpoint", "calls", f"{calls} is negative", "restore a checkpoint of the same scene")

@@ -208,6 +208,13 @@ def test_state_dict_round_trip_continues_identically(device: str) -> None:
         second.load_state_dict({"front": np.array([bvh.node_count]), "calls": np.array([0])})
     with pytest.raises(InputError):
         second.load_state_dict({"front": np.array([0]), "calls": np.array([-1])})
+    # Node ids in range that are not a cut (a face in two nodes, faces in none): refused, the front kept.
+    kept = second.front.numpy()[: second.front_size].copy()
+    root, child = int(bvh.roots[0]), int(bvh.left[bvh.roots[0]])
+    for nodes in ([root, child], [child]):
+        with pytest.raises(InputError, match="do not cover each of the"):
+            second.load_state_dict({"front": np.array(nodes), "calls": np.array([0])})
+        assert np.array_equal(second.front.numpy()[: second.front_size], kept)
 
 
 def test_largest_front_fills_the_buffers(device: str) -> None:
