@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from pscc._checks import INT32_MAX, as_numpy, check_object_ids
-from pscc.collision.connected_splits import connected_cut, face_adjacency, face_links, split_pieces, union_roots
+from pscc.collision.connected_splits import connected_cuts, face_adjacency, face_links, split_pieces, union_roots
 from pscc.collision.panel_alignment import aligned_face_corners
 from pscc.collision.reference_points import reference_faces
 from pscc.errors import InputError
@@ -657,18 +657,16 @@ class _HalfConnector:
 
 def _connect_halves(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, median: np.ndarray,
                     left_count: np.ndarray, splitter: _HalfConnector) -> None:
-    """Cut again along the surface (:func:`~pscc.collision.connected_splits.connected_cut`) the ``median``
+    """Cut again along the surface (:func:`~pscc.collision.connected_splits.connected_cuts`) the ``median``
     nodes of one level whose cut leaves a half that is not edge-connected; ``face_order`` and ``left_count``
     are updated in place for those a connected cut was found for."""
     nodes = np.flatnonzero(median)
-    broken = split_pieces(face_order, begin[nodes], end[nodes], left_count[nodes], splitter.links,
-                          splitter.face_count)
-    for i in nodes[broken].tolist():
-        lo, hi = int(begin[i]), int(end[i])
-        order = connected_cut(face_order[lo:hi], splitter.adjacency)
-        if order is not None:
-            face_order[lo:hi] = order
-            left_count[i] = (hi - lo + 1) // 2
+    broken = nodes[split_pieces(face_order, begin[nodes], end[nodes], left_count[nodes], splitter.links,
+                                splitter.face_count)]
+    if broken.size:
+        reordered = broken[connected_cuts(face_order, begin[broken], end[broken], splitter.adjacency,
+                                          splitter.links)]
+        left_count[reordered] = (end[reordered] - begin[reordered] + 1) // 2
 
 
 def _build_tree(geometry: tuple[np.ndarray, ...], object_ids: np.ndarray, topology: MeshTopology,

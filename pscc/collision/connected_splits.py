@@ -9,7 +9,8 @@ every pair of nearby faces of the part is tested. On Newton's `crazyflie` and `r
 10 such failing nodes just above the front were disconnected.
 
 This module finds the cuts whose halves are not edge-connected (:func:`split_pieces`, vectorised over a
-tree level) and cuts those nodes again along the surface (:func:`connected_cut`): faces ordered by their
+tree level) and cuts those nodes again along the surface (:func:`connected_cuts`, all of a level's nodes in
+the same breadth-first passes; :func:`connected_cut` for one node): faces ordered by their
 graph distance to one far face minus that to another (two ends found by breadth-first search over shared
 edges), cut at the median; failing that, by the distance to the first end alone. A cut is kept only when
 both halves are edge-connected, else the median cut stays. Either way the node's faces and the tree's
@@ -62,7 +63,7 @@ def face_links(topology: MeshTopology) -> tuple[np.ndarray, np.ndarray]:
 
 
 def face_adjacency(topology: MeshTopology, face_count: int) -> sparse.csr_matrix:
-    """The faces' edge-adjacency graph (symmetric CSR, unit weights), for :func:`connected_cut`."""
+    """The faces' edge-adjacency graph (symmetric CSR, unit weights), for :func:`connected_cuts`."""
     u, v = face_links(topology)
     rows = np.concatenate([u, v])
     cols = np.concatenate([v, u])
@@ -93,31 +94,86 @@ def split_pieces(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, lef
     return (pieces[0::2] > 1) | (pieces[1::2] > 1)
 
 
-def _connected(graph: sparse.csr_matrix) -> bool:
-    return graph.shape[0] <= 1 or csgraph.connected_components(graph, directed=False)[0] == 1
+def _level_faces(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The positions of the nodes' faces in ``face_order``, each one's node and its rank within the node."""
+    lengths = (end - begin).astype(np.int64)
+    node = np.repeat(np.arange(lengths.shape[0], dtype=np.int64), lengths)
+    rank = np.arange(int(lengths.sum()), dtype=np.int64) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    return rank + begin[node], node, rank
 
 
-def _halves_connected(graph: sparse.csr_matrix, order: np.ndarray, cut: int) -> bool:
-    left, right = order[:cut], order[cut:]
-    return _connected(graph[left][:, left]) and _connected(graph[right][:, right])
+def _distances(sources: np.ndarray, label: np.ndarray, adjacency: sparse.csr_matrix) -> np.ndarray:
+    """Breadth-first graph distances (in shared edges) from ``sources`` (one face per node), each search
+    kept to the faces of its source's node (``label``: node of each face, -1 outside); -1 where not reached.
+    All nodes' searches advance together, one frontier per step."""
+    distance = np.full(label.shape[0], -1, dtype=np.int64)
+    distance[sources] = 0
+    frontier = sources
+    step = 0
+    indptr, indices = adjacency.indptr, adjacency.indices
+    while frontier.size:
+        step += 1
+        counts = indptr[frontier + 1] - indptr[frontier]
+        origin = np.repeat(frontier, counts)
+        offsets = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        neighbour = indices[np.repeat(indptr[frontier], counts) + offsets]
+        fresh = (distance[neighbour] < 0) & (label[neighbour] == label[origin])
+        frontier = np.unique(neighbour[fresh])
+        distance[frontier] = step
+    return distance
+
+
+def connected_cuts(face_order: np.ndarray, begin: np.ndarray, end: np.ndarray, adjacency: sparse.csr_matrix,
+                   links: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Cut the nodes ``face_order[begin[i]:end[i]]`` (disjoint, edge-connected or not) again along the
+    surface: each node's faces ordered by graph distance to its first face minus that to the face farthest
+    from it (ties by their given order), else by the distance to the first face alone, and cut at the median
+    ``(k + 1) // 2``. A node whose new cut leaves both halves edge-connected gets its faces reordered in
+    ``face_order``; the others (and nodes not edge-connected themselves) are left as they are.
+
+    Returns:
+        (nodes,) bool: the nodes reordered. Work: a few breadth-first passes over the nodes' faces, all nodes
+        at once.
+    """
+    face_count = adjacency.shape[0]
+    positions, node, rank = _level_faces(face_order, begin, end)
+    faces = face_order[positions]
+    sizes = (end - begin).astype(np.int64)
+    label = np.full(face_count, -1, dtype=np.int64)
+    label[faces] = node
+    first = face_order[begin]
+    from_first = _distances(first, label, adjacency)[faces]
+    # Nodes in pieces: a face the first one's search never reached.
+    whole = np.bincount(node, weights=(from_first < 0), minlength=sizes.shape[0]) == 0
+    # The far end: the largest distance, the first such face in the given order.
+    best = np.full(sizes.shape[0], -1, dtype=np.int64)
+    np.maximum.at(best, node, from_first)
+    far_rank = np.full(sizes.shape[0], np.iinfo(np.int64).max)
+    np.minimum.at(far_rank, node, np.where(from_first == best[node], rank, np.iinfo(np.int64).max))
+    far = face_order[begin + np.minimum(far_rank, sizes - 1)]
+    from_far = _distances(far, label, adjacency)[faces]
+    done = ~whole | (sizes < 2)
+    for key in (from_first - from_far, from_first):
+        pending = np.flatnonzero(~done)
+        if pending.size == 0:
+            break
+        order = np.lexsort((rank, key, node))
+        ordered = faces[order]
+        trial = face_order.copy()
+        trial[positions] = ordered
+        cut = (sizes + 1) // 2
+        pieces = split_pieces(trial, begin[pending], end[pending], cut[pending], links, face_count)
+        accept = pending[~pieces]
+        take = np.isin(node[order], accept)
+        face_order[positions[take]] = ordered[take]
+        done[accept] = True
+    return done & whole & (sizes >= 2)
 
 
 def connected_cut(faces: np.ndarray, adjacency: sparse.csr_matrix) -> np.ndarray | None:
-    """A reordering of ``faces`` (one node's faces, in the order of its median cut) whose first
-    ``(k + 1) // 2`` faces and the rest are both edge-connected, or None when the search finds none (or the
-    node itself is not edge-connected). Ties keep the given order, so the result is deterministic."""
-    k = faces.shape[0]
-    cut = (k + 1) // 2
-    graph = adjacency[faces][:, faces]
-    if k < 2 or not _connected(graph):
-        return None
-    rank = np.arange(k)
-    # One end: the graph distances from the first face of the median cut (an extreme along its axis).
-    from_first = csgraph.shortest_path(graph, directed=False, unweighted=True, indices=0)
-    far = int(np.argmax(from_first))
-    from_far = csgraph.shortest_path(graph, directed=False, unweighted=True, indices=far)
-    for key in (from_first - from_far, from_first):
-        order = np.lexsort((rank, key))
-        if _halves_connected(graph, order, cut):
-            return faces[order]
-    return None
+    """:func:`connected_cuts` of one node: the reordered ``faces`` (in the order of its median cut), or None
+    when the search finds no cut with both halves edge-connected (or the faces are not edge-connected)."""
+    order = np.array(faces, dtype=np.int64)
+    u, v = sparse.triu(adjacency).nonzero()
+    reordered = connected_cuts(order, np.array([0]), np.array([order.shape[0]]), adjacency, (u, v))
+    return order if reordered[0] else None

@@ -24,6 +24,9 @@ import numpy as np
 MAX_CANDIDATES = 64
 """At most this many face centroids are tried per node (those nearest its area-weighted centroid)."""
 
+BATCH_TURNS = 1 << 21
+"""Candidate-edge pairs evaluated together (bounds the search's memory to a few hundred MB)."""
+
 MIN_TURN = 1.0e-6
 """A contour edge must turn around o by at least this much (``|l . (a - o) x (b - o)| / (|a - o| |b - o|)``,
 the sine of the angle it subtends) for a candidate to count: a tolerance for the float32 test at run time."""
@@ -43,13 +46,6 @@ def _turns(o: np.ndarray, tails: np.ndarray, heads: np.ndarray, axis: np.ndarray
     b = heads - o
     norms = np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)
     return np.sum(np.cross(a, b) * axis, axis=-1) / np.where(norms > 0.0, norms, np.inf)
-
-
-def _one_way(turns: np.ndarray) -> np.ndarray:
-    """The smallest turn when every edge turns the same way by at least :data:`MIN_TURN`, else -1."""
-    low = np.min(turns, axis=-1)
-    high = np.max(turns, axis=-1)
-    return np.where(low >= MIN_TURN, low, np.where(high <= -MIN_TURN, -high, -1.0))
 
 
 def reference_faces(faces: np.ndarray, shape: np.ndarray, host: dict[str, np.ndarray]) -> np.ndarray:
@@ -79,7 +75,7 @@ def reference_faces(faces: np.ndarray, shape: np.ndarray, host: dict[str, np.nda
     if nodes.shape[0] == 0:
         return chosen
     # Every candidate node's axis (its faces' area-weighted normal) and the star test of its contour mean at
-    # once; only the nodes that fail it are searched, one by one.
+    # once; only the nodes that fail it are searched.
     face_positions, face_starts = _ranges(begin[nodes], end[nodes])
     axes = np.add.reduceat(normal[order[face_positions]], face_starts, axis=0)
     lengths = np.linalg.norm(axes, axis=1)
@@ -94,20 +90,57 @@ def reference_faces(faces: np.ndarray, shape: np.ndarray, host: dict[str, np.nda
     turns = _turns(means[node_of_slot], tails, heads, unit[node_of_slot])
     mean_passes = (np.minimum.reduceat(turns, loop_starts) >= MIN_TURN) | (
         np.maximum.reduceat(turns, loop_starts) <= -MIN_TURN)
-    for k in np.flatnonzero(~mean_passes & (lengths > 0.0)).tolist():
-        node = int(nodes[k])
-        loop = points[loops[offsets[node]:offsets[node + 1]]]
-        node_faces = order[begin[node]:end[node]]
-        area = weight[node_faces]
-        if area.sum() > 0.0:
-            center = (area @ centroid[node_faces]) / area.sum()
-        else:
-            center = centroid[node_faces].mean(axis=0)
-        distance = np.sum((centroid[node_faces] - center) ** 2, axis=1)
-        candidates = node_faces[np.lexsort((node_faces, distance))[:MAX_CANDIDATES]]
-        margin = _one_way(_turns(centroid[candidates][:, None, :], loop[None], np.roll(loop, -1, axis=0)[None],
-                                 unit[k]))
-        best = int(np.argmax(margin))
-        if margin[best] > 0.0:
-            chosen[node] = candidates[best]
+    search = np.flatnonzero(~mean_passes & (lengths > 0.0))
+    # The search, a batch of nodes at a time (at most about BATCH_TURNS candidate-edge pairs): each node's
+    # candidates are its MAX_CANDIDATES faces nearest its area-weighted centroid (ties by face id).
+    face_counts = (end[nodes] - begin[nodes]).astype(np.int64)
+    pairs = np.cumsum(np.minimum(face_counts[search], MAX_CANDIDATES) * loop_lengths[search])
+    for batch in np.split(search, np.flatnonzero(np.diff(pairs // BATCH_TURNS)) + 1):
+        if batch.size:
+            chosen[nodes[batch]] = _search(batch, nodes, order, begin, end, offsets, loops, points, centroid, weight,
+                                           unit)
     return chosen
+
+
+def _search(batch: np.ndarray, nodes: np.ndarray, order: np.ndarray, begin: np.ndarray, end: np.ndarray,
+            offsets: np.ndarray, loops: np.ndarray, points: np.ndarray, centroid: np.ndarray, weight: np.ndarray,
+            unit: np.ndarray) -> np.ndarray:
+    """The chosen face (or -1) of each node ``nodes[batch]`` (:func:`reference_faces`), all at once."""
+    ids = nodes[batch]
+    face_positions, face_starts = _ranges(begin[ids], end[ids])
+    face_lengths = (end[ids] - begin[ids]).astype(np.int64)
+    owner = np.repeat(np.arange(batch.size), face_lengths)
+    node_faces = order[face_positions]
+    area = weight[node_faces]
+    total = np.add.reduceat(area, face_starts)
+    weighted = np.add.reduceat(area[:, None] * centroid[node_faces], face_starts, axis=0)
+    plain = np.add.reduceat(centroid[node_faces], face_starts, axis=0) / face_lengths[:, None]
+    center = np.where(total[:, None] > 0.0, weighted / np.where(total > 0.0, total, 1.0)[:, None], plain)
+    distance = np.sum((centroid[node_faces] - center[owner]) ** 2, axis=1)
+    ranked = np.lexsort((node_faces, distance, owner))
+    place = np.arange(ranked.size) - np.repeat(face_starts, face_lengths)
+    keep = ranked[place < MAX_CANDIDATES]
+    candidate, candidate_owner = node_faces[keep], owner[keep]
+    # Every (candidate, contour edge) pair of its node, candidate-major.
+    loop_lengths = (offsets[ids + 1] - offsets[ids]).astype(np.int64)
+    edges = loop_lengths[candidate_owner]
+    pair_owner = np.repeat(candidate_owner, edges)
+    local = np.arange(int(edges.sum())) - np.repeat(np.cumsum(edges) - edges, edges)
+    tail_slot = offsets[ids][pair_owner] + local
+    head_slot = np.where(local + 1 == loop_lengths[pair_owner], offsets[ids][pair_owner], tail_slot + 1)
+    o = np.repeat(centroid[candidate], edges, axis=0)
+    turns = _turns(o, points[loops[tail_slot]], points[loops[head_slot]], unit[batch][pair_owner])
+    starts = np.cumsum(edges) - edges
+    low = np.minimum.reduceat(turns, starts)
+    high = np.maximum.reduceat(turns, starts)
+    margin = np.where(low >= MIN_TURN, low, np.where(high <= -MIN_TURN, -high, -1.0))
+    # Per node, the candidate with the largest margin (the nearest such one on ties), if it is positive.
+    best = np.full(batch.size, -np.inf)
+    np.maximum.at(best, candidate_owner, margin)
+    first = np.full(batch.size, np.iinfo(np.int64).max)
+    np.minimum.at(first, candidate_owner, np.where(margin == best[candidate_owner], np.arange(margin.size),
+                                                   np.iinfo(np.int64).max))
+    found = best > 0.0
+    result = np.full(batch.size, -1, dtype=np.int64)
+    result[found] = candidate[first[found]]
+    return result
