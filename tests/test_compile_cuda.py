@@ -47,6 +47,10 @@ def test_jobs_below_one_are_refused() -> None:
 def test_a_kernel_cache_is_filled_in_warps_layout(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """--cache: the module's cubin and metadata land where Warp looks for them under WARP_CACHE_PATH."""
     monkeypatch.setattr(compile_cuda, "kernel_modules", lambda: ["pscc.sim.pcg"])
+    # With one job the tool points this process's Warp kernel cache at tmp_path: put it back afterwards, or
+    # the later tests of this worker compile their kernels again there.
+    compile_cuda.wp.init()  # sets the cache path that is kept
+    monkeypatch.setattr(compile_cuda.wp.config, "kernel_cache_dir", compile_cuda.wp.config.kernel_cache_dir)
     assert compile_cuda.main(["--arch", "90", "--jobs", "1", "--cache", str(tmp_path)]) == 0
     (version,) = [p for p in tmp_path.iterdir() if p.is_dir()]
     (module,) = [p for p in version.iterdir() if p.name.startswith("wp_pscc.sim.pcg_")]
