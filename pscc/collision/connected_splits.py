@@ -13,8 +13,9 @@ tree level) and cuts those nodes again along the surface (:func:`connected_cuts`
 the same breadth-first passes; :func:`connected_cut` for one node): faces ordered by their
 graph distance to one far face minus that to another (two ends found by breadth-first search over shared
 edges), cut at the median; failing that, by the distance to the first end alone. A cut is kept only when
-both halves are edge-connected, else the median cut stays. Either way the node's faces and the tree's
-shape (a median cut, left half the larger by at most one) are unchanged: only which faces go left.
+both halves are edge-connected, else the first cut stays. The node keeps its faces either way; a node cut
+again is cut at the median, (k + 1) // 2 faces to the left (the first cut may have moved to a gap between
+centroids), so the tree stays balanced.
 """
 
 from __future__ import annotations
