@@ -84,3 +84,25 @@ def test_a_missing_perf_or_frame_is_named(tmp_path: Path, monkeypatch: pytest.Mo
     assert profile_cpu.main([f"{tmp_path / 'nowhere.npz'}:0.01"]) == 2
     message = capsys.readouterr().err
     assert "nowhere.npz" in message and "Fix:" in message
+
+
+def test_a_missing_nm_or_a_failing_recording_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    mesh = folded_sheet(300, layers=3, seed=2)
+    frame = tmp_path / "layers.npz"
+    np.savez(frame, positions=mesh.vertices_end, faces=mesh.faces, rest=mesh.rest)
+    monkeypatch.setattr(profile_cpu.shutil, "which", lambda name: None if name == "nm" else f"/usr/bin/{name}")
+    assert profile_cpu.main([f"{frame}:0.01"]) == 2
+    message = capsys.readouterr().err
+    assert "`nm`" in message and "Fix: install binutils" in message
+    monkeypatch.setattr(profile_cpu.shutil, "which", lambda name: f"/usr/bin/{name}")
+
+    def refused(*args: object) -> None:
+        raise subprocess.CalledProcessError(255, ["/usr/bin/perf", "record", "-q"],
+                                            stderr="Error:\nAccess to performance monitoring is restricted.")
+
+    monkeypatch.setattr(profile_cpu, "profile", refused)
+    assert profile_cpu.main([f"{frame}:0.01"]) == 2
+    message = capsys.readouterr().err
+    assert "layers.npz:0.01" in message and "exit status 255" in message
+    assert "Access to performance monitoring is restricted." in message and "perf_event_paranoid" in message

