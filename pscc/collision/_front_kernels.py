@@ -8,6 +8,7 @@ import warp as wp
 
 from pscc.collision.bvh import MaterialBvhArrays
 from pscc.geometry import normal_cone as nc
+from pscc.geometry import simple_contour as sc
 
 wp.set_module_options({"enable_backward": False})
 
@@ -29,6 +30,7 @@ class NodeTestArgs:
     margin: wp.float32
     degenerate_ratio: wp.float32
     seam_gap_ratio: wp.float32
+    simple_contour_max_edges: wp.int32
 
 
 @wp.func
@@ -93,10 +95,17 @@ def _node_passes(args: NodeTestArgs, node: int) -> bool:
         scale = 1.0 / float(wp.max(end - begin, 1))
         o0 = o0 * scale
         o1 = o1 * scale
+    star = bool(False)
     if args.swept == 1:
-        return nc.contour_test_swept(bvh.contour_vertices, begin, end, args.positions_t0, args.positions_t1,
+        star = nc.contour_test_swept(bvh.contour_vertices, begin, end, args.positions_t0, args.positions_t1,
                                      o0, o1, l, args.margin)
-    return nc.contour_test(bvh.contour_vertices, begin, end, args.positions_t0, o0, l, args.margin)
+    else:
+        star = nc.contour_test(bvh.contour_vertices, begin, end, args.positions_t0, o0, l, args.margin)
+    if star or end - begin > args.simple_contour_max_edges:
+        return star
+    # No point sees the loop turn one way: check that it is simple, edge pair by edge pair.
+    return sc.contour_is_simple(bvh.contour_vertices, begin, end, args.positions_t0, args.positions_t1, l,
+                                args.margin, args.swept)
 
 
 @wp.func

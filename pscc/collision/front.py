@@ -82,6 +82,7 @@ from pscc.collision.bvh import MaterialBvh
 from pscc.collision.scratch import TableSpec, place_tables, scratch_lenders
 from pscc.errors import InputError
 from pscc.geometry import normal_cone as nc
+from pscc.geometry import simple_contour
 
 wp.set_module_options({"enable_backward": False})
 
@@ -149,6 +150,7 @@ class NormalConeFront:
         self.args.margin = tolerances.NORMAL_CONE_MARGIN
         self.args.degenerate_ratio = tolerances.DEGENERATE_FACE_RATIO
         self.args.seam_gap_ratio = tolerances.SEAM_GAP_RATIO
+        self.args.simple_contour_max_edges = simple_contour.SIMPLE_CONTOUR_MAX_EDGES
 
     # --- lent memory ---------------------------------------------------------------------------
 

@@ -16,6 +16,7 @@ from pscc.collision.bvh import MaterialBvh
 from pscc.collision.connected_splits import connected_cut, face_adjacency, face_links, split_pieces, union_roots
 from pscc.collision.intrinsic import bvh_material
 from pscc.collision.reference_points import reference_faces
+from pscc.geometry import simple_contour
 from pscc.mesh import MeshTopology
 from tests.collision.test_bvh import check_contours, check_tree
 from tests.collision.test_pscc import _assert_same_contacts, _check_dcd_contract, _detectors
@@ -211,13 +212,15 @@ def test_reference_faces_see_the_contour_turn_one_way(seed: int) -> None:
 
 
 def test_reference_faces_shrink_the_front(monkeypatch: pytest.MonkeyPatch) -> None:
-    """pscc's detector on a plate of thinner slivers without rest: with the faces' centroids as the contour
-    test's points, its front has fewer nodes than with the contour means (284 against 343)."""
+    """pscc's detector on a plate of thinner slivers without rest, the star test alone (no simple-contour
+    fallback): with the faces' centroids as the contour test's points, its front has fewer nodes than with
+    the contour means (284 against 343)."""
     vertices, faces = sliver_plate(400, 0, stretch=50.0)
     x = vertices.astype(np.float32)
     sizes = {}
     for label in ("faces", "means"):
         with monkeypatch.context() as patch:
+            patch.setattr(simple_contour, "SIMPLE_CONTOUR_MAX_EDGES", 0)
             if label == "means":
                 patch.setattr(bvh_module, "reference_faces",
                               lambda faces, shape, host: np.full(host["left"].shape[0], -1, dtype=np.int64))
