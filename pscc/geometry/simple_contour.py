@@ -44,7 +44,7 @@ from pscc.geometry import normal_cone as nc
 
 wp.set_module_options({"enable_backward": False})
 
-SIMPLE_CONTOUR_MAX_EDGES: int = 64
+SIMPLE_CONTOUR_MAX_EDGES: int = 128
 """Longest contour (edges) that the node test checks edge pair by edge pair when its star test fails."""
 
 
