@@ -124,6 +124,21 @@ def corner_apart(a0: wp.vec3, v0: wp.vec3, c0: wp.vec3, a1: wp.vec3, v1: wp.vec3
 
 
 @wp.func
+def _interval(w: wp.vec3, r: wp.vec3, a0: wp.vec3, b0: wp.vec3, a1: wp.vec3, b1: wp.vec3) -> wp.vec2:
+    """[min, max] of w . (p - r) over the four points."""
+    pa0 = wp.dot(a0 - r, w)
+    pb0 = wp.dot(b0 - r, w)
+    pa1 = wp.dot(a1 - r, w)
+    pb1 = wp.dot(b1 - r, w)
+    return wp.vec2(wp.min(wp.min(pa0, pb0), wp.min(pa1, pb1)), wp.max(wp.max(pa0, pb0), wp.max(pa1, pb1)))
+
+
+@wp.func
+def _disjoint(x: wp.vec2, y: wp.vec2, pad: float) -> bool:
+    return x[1] + pad < y[0] or y[1] + pad < x[0]
+
+
+@wp.func
 def contour_is_simple(
     loop: wp.array(dtype=wp.int32),
     begin: int,
@@ -135,10 +150,24 @@ def contour_is_simple(
     swept: int,
 ) -> bool:
     """Whether the loop ``loop[begin:end]`` projected along the unit direction ``l`` is a simple polygon
-    with a gap (at t0, or at every t of a linear step from t0 to t1 when ``swept``)."""
+    with a gap (at t0, or at every t of a linear step from t0 to t1 when ``swept``).
+
+    Edge i's two axes (its in-plane normal and direction) and its intervals on them are computed once;
+    most later edges j lie on one side of edge i's line or beyond its ends, which two dot products per
+    end show. Only the other pairs go through :func:`edges_apart`. The pads of these first two axes use
+    the loop's extent around its first vertex (every |p - r|, both ends of a step), which bounds each
+    pair's own, so they are at least as large as :func:`edges_apart`'s."""
     count = end - begin
     if count < 3:
         return False
+    r = positions_t0[loop[begin]]
+    extent = float(0.0)
+    for i in range(count):
+        v = loop[begin + i]
+        extent = wp.max(extent, wp.length_sq(positions_t0[v] - r))
+        if swept == 1:
+            extent = wp.max(extent, wp.length_sq(positions_t1[v] - r))
+    extent = wp.sqrt(extent)
     for i in range(count):
         ia = loop[begin + i]
         ib = loop[begin + (i + 1) % count]
@@ -156,20 +185,32 @@ def contour_is_simple(
             c1 = positions_t1[ic]
         if not corner_apart(a0, b0, c0, a1, b1, c1, l, margin, swept):
             return False
+        e = 0.5 * ((b0 - a0) + (b1 - a1))
+        normal = wp.cross(l, e)
+        along = _in_plane(e, l)
+        normal_pad = margin * wp.length(normal) * extent
+        along_pad = margin * wp.length(along) * extent
+        edge_normal = _interval(normal, r, a0, b0, a1, b1)
+        edge_along = _interval(along, r, a0, b0, a1, b1)
         # Non-adjacent edges j > i + 1; the last edge is adjacent to the first.
         last = count
         if i == 0:
             last = count - 1
+        cj0 = c0
+        cj1 = c1
         for j in range(i + 2, last):
-            jc = loop[begin + j]
             jd = loop[begin + (j + 1) % count]
-            cj0 = positions_t0[jc]
             dj0 = positions_t0[jd]
-            cj1 = cj0
             dj1 = dj0
             if swept == 1:
-                cj1 = positions_t1[jc]
                 dj1 = positions_t1[jd]
-            if not edges_apart(a0, b0, a1, b1, cj0, dj0, cj1, dj1, l, margin):
+            apart = _disjoint(edge_normal, _interval(normal, r, cj0, dj0, cj1, dj1), normal_pad)
+            if not apart:
+                apart = _disjoint(edge_along, _interval(along, r, cj0, dj0, cj1, dj1), along_pad)
+            if not apart:
+                apart = edges_apart(a0, b0, a1, b1, cj0, dj0, cj1, dj1, l, margin)
+            if not apart:
                 return False
+            cj0 = dj0
+            cj1 = dj1
     return True
