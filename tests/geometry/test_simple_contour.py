@@ -225,3 +225,23 @@ def test_edges_apart_over_a_step(device) -> None:
     assert run(a + a + below + below)
     assert not run(a + a + above + below)
     assert run(a + a + above + [[0.4, 0.5, 0], [0.6, 0.5, 0]])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_random_swept_loops_are_simple_at_every_sampled_time(seed: int, device) -> None:
+    """Untangled random polygons moved by random linear motions, some small (they stay simple) and some
+    large (they cross themselves on the way): a loop that passes is simple, with a gap, at each of 101
+    times of the step in float64."""
+    rng = np.random.default_rng(100 + seed)
+    passed = 0
+    for case in range(30):
+        count = int(rng.integers(4, 16))
+        start = _untangled(rng.random((count, 2)), rng)
+        motion = rng.normal(0.0, [0.01, 0.05, 0.3][case % 3], (count, 2))
+        end = start + motion
+        got = _simple(start, points_t1=end, device=device)
+        if got:
+            passed += 1
+            for t in np.linspace(0.0, 1.0, 101):
+                assert _gap(start + t * motion) > 0.0, f"case {case}: passed but not simple at t = {t:.2f}"
+    assert passed >= 5
