@@ -237,12 +237,17 @@ def test_sliver_plates_hide_no_contact(seed: int, motion: float) -> None:
     (nodes certified with reference faces and connected cuts never hide a contact); DCD at a radius keeps
     pscc's contract (tests/collision/test_pscc.py)."""
     vertices, faces = sliver_plate(300, seed % 1000)
+    assert_shaken_hides_no_contact(faces, vertices.astype(np.float32), seed, motion, "sliver plate")
+
+
+def assert_shaken_hides_no_contact(faces: np.ndarray, x0: np.ndarray, seed: int, motion: float, label: str) -> None:
+    """pscc's CCD from ``x0`` to ``x0`` plus Gaussian noise of deviation ``motion``, and its touching DCD at
+    the end, equal brute force (no rest coordinates); its DCD at radius 0.01 keeps pscc's contract."""
     rng = np.random.default_rng(seed)
-    x0 = vertices.astype(np.float32)
     x1 = (x0 + rng.normal(0.0, motion, x0.shape)).astype(np.float32)
     detectors = _detectors(faces)
     for positions, end in ((x0, x1), (x1, None)):
         reference = detectors["brute-force"].detect(positions, end)
         result = detectors["pscc"].detect(positions, end)
-        _assert_same_contacts(result, reference, faces, positions, end, 0.0, "sliver plate")
+        _assert_same_contacts(result, reference, faces, positions, end, 0.0, label)
     _check_dcd_contract(faces, x0, 0.01, detectors)

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pscc.geometry import simple_contour
+from tests.collision.test_connected_splits import assert_shaken_hides_no_contact
 from tests.collision.test_pscc import _assert_same_contacts, _check_dcd_contract, _detectors
 
 
@@ -111,12 +112,4 @@ def test_shaken_combs_hide_no_contact(seed: int, motion: float) -> None:
     """CCD and touching DCD of pscc equal brute force on combs shaken at random (no rest): teeth pushed
     through each other are found; DCD at a radius keeps pscc's contract."""
     vertices, faces = comb_panel()
-    rng = np.random.default_rng(seed)
-    x0 = bent(vertices, 0.05)
-    x1 = (x0 + rng.normal(0.0, motion, x0.shape)).astype(np.float32)
-    detectors = _detectors(faces)
-    for positions, end in ((x0, x1), (x1, None)):
-        reference = detectors["brute-force"].detect(positions, end)
-        result = detectors["pscc"].detect(positions, end)
-        _assert_same_contacts(result, reference, faces, positions, end, 0.0, "comb")
-    _check_dcd_contract(faces, x0, 0.01, detectors)
+    assert_shaken_hides_no_contact(faces, bent(vertices, 0.05), seed, motion, "comb")
