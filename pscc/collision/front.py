@@ -3,7 +3,8 @@
 The front is a cut of the material-space BVH (:class:`pscc.collision.bvh.MaterialBvh`): every face
 has exactly one ancestor-or-self in it, and that node's id is the face's *node id*. A front node is
 a leaf, a rigid object, or a node whose patch passed the normal-cone test (normal directions and
-unprojected contour, :mod:`pscc.geometry.normal_cone`), so no two of its faces can collide: the
+unprojected contour, :mod:`pscc.geometry.normal_cone`, or, when no point sees the contour turn one way,
+the simple-polygon check of :mod:`pscc.geometry.simple_contour`), so no two of its faces can collide: the
 spatial hash never pairs faces with the same node id.
 
 Every :meth:`NormalConeFront.update` call (temporal coherence: the front persists across calls):

@@ -22,7 +22,8 @@ orthogonal to l (through the midpoint of the first edge), sigma_i = sign(l . (r 
 non-zero and the number of sign changes from -s0 to s0 along the loop must be 1. For CCD the same
 conditions are checked on the Bernstein coefficients over the step (quadratic for S, linear for
 sigma), so they hold at every time. Values within a relative rounding margin of zero count as a
-failure, so the test is conservative.
+failure, so the test is conservative. A loop that no point o sees turn one way can still be simple:
+:mod:`pscc.geometry.simple_contour` checks that directly, and the node test falls back to it.
 """
 
 from __future__ import annotations
