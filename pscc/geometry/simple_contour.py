@@ -27,13 +27,16 @@ positions at t = 1/2) and every end point moves linearly, so w . p(t) stays betw
 t0 and t1: the intervals are taken over both ends. The adjacent-edge sign uses the quadratic
 Bernstein form of :func:`pscc.geometry.normal_cone.swept_signed_area_sign`.
 
-*Rounding.* Values are taken relative to one end point of the first edge. The pad of an axis w is
-``margin`` x |w| x (the largest |p - r| over the eight end points p), with ``margin`` the normal-cone
-margin (1e-5, about 84 float32 units in the last place): it covers the float32 error of the
-differences and of the dot products (under 4 u |w| |p - r|). Values inside the pad count as touching.
+*Rounding.* Values are taken relative to a point r: one end point of the first edge of a pair in
+:func:`edges_apart`, the loop's first vertex in :func:`contour_is_simple`'s first two axes. The pad of an
+axis w is ``margin`` x |w| x (the largest |p - r| over the points projected: the pair's eight end points,
+or every loop vertex at both ends of the step), with ``margin`` the normal-cone margin (1e-5, about 84
+float32 units in the last place): it covers the float32 error of the differences and of the dot products
+(under 4 u |w| |p - r|). Values inside the pad count as touching.
 
-*Cost.* O(k^2) for k contour edges, each pair ending at its first separating axis; the node test runs
-it only when the star test has failed and k <= :data:`SIMPLE_CONTOUR_MAX_EDGES`.
+*Cost.* O(k^2) for k contour edges, each pair ending at its first separating axis (edge i's own normal
+and direction first, computed once per i); the node test runs it only when the star test has failed and
+k <= :data:`SIMPLE_CONTOUR_MAX_EDGES`.
 """
 
 from __future__ import annotations
