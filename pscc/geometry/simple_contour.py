@@ -52,22 +52,26 @@ SIMPLE_CONTOUR_MAX_EDGES: int = 128
 
 
 @wp.func
-def _separated(w: wp.vec3, r: wp.vec3, a0: wp.vec3, b0: wp.vec3, a1: wp.vec3, b1: wp.vec3, c0: wp.vec3,
-               d0: wp.vec3, c1: wp.vec3, d1: wp.vec3, pad: float) -> bool:
-    """Whether axis ``w`` separates {a0, b0, a1, b1} from {c0, d0, c1, d1} by more than ``pad``."""
+def _interval(w: wp.vec3, r: wp.vec3, a0: wp.vec3, b0: wp.vec3, a1: wp.vec3, b1: wp.vec3) -> wp.vec2:
+    """[min, max] of w . (p - r) over the four points."""
     pa0 = wp.dot(a0 - r, w)
     pb0 = wp.dot(b0 - r, w)
     pa1 = wp.dot(a1 - r, w)
     pb1 = wp.dot(b1 - r, w)
-    pc0 = wp.dot(c0 - r, w)
-    pd0 = wp.dot(d0 - r, w)
-    pc1 = wp.dot(c1 - r, w)
-    pd1 = wp.dot(d1 - r, w)
-    low_e = wp.min(wp.min(pa0, pb0), wp.min(pa1, pb1))
-    high_e = wp.max(wp.max(pa0, pb0), wp.max(pa1, pb1))
-    low_f = wp.min(wp.min(pc0, pd0), wp.min(pc1, pd1))
-    high_f = wp.max(wp.max(pc0, pd0), wp.max(pc1, pd1))
-    return high_e + pad < low_f or high_f + pad < low_e
+    return wp.vec2(wp.min(wp.min(pa0, pb0), wp.min(pa1, pb1)), wp.max(wp.max(pa0, pb0), wp.max(pa1, pb1)))
+
+
+@wp.func
+def _disjoint(x: wp.vec2, y: wp.vec2, pad: float) -> bool:
+    """Whether the intervals [x0, x1] and [y0, y1] lie apart by more than ``pad``."""
+    return x[1] + pad < y[0] or y[1] + pad < x[0]
+
+
+@wp.func
+def _separated(w: wp.vec3, r: wp.vec3, a0: wp.vec3, b0: wp.vec3, a1: wp.vec3, b1: wp.vec3, c0: wp.vec3,
+               d0: wp.vec3, c1: wp.vec3, d1: wp.vec3, pad: float) -> bool:
+    """Whether axis ``w`` separates {a0, b0, a1, b1} from {c0, d0, c1, d1} by more than ``pad``."""
+    return _disjoint(_interval(w, r, a0, b0, a1, b1), _interval(w, r, c0, d0, c1, d1), pad)
 
 
 @wp.func
@@ -124,21 +128,6 @@ def corner_apart(a0: wp.vec3, v0: wp.vec3, c0: wp.vec3, a1: wp.vec3, v1: wp.vec3
                     wp.max(wp.length(v1 - a0), wp.max(wp.length(c1 - a0), wp.length(a1 - a0))))
     pad = margin * wp.length(w) * extent
     return _going_on(a0, v0, c0, w, pad) and _going_on(a1, v1, c1, w, pad)
-
-
-@wp.func
-def _interval(w: wp.vec3, r: wp.vec3, a0: wp.vec3, b0: wp.vec3, a1: wp.vec3, b1: wp.vec3) -> wp.vec2:
-    """[min, max] of w . (p - r) over the four points."""
-    pa0 = wp.dot(a0 - r, w)
-    pb0 = wp.dot(b0 - r, w)
-    pa1 = wp.dot(a1 - r, w)
-    pb1 = wp.dot(b1 - r, w)
-    return wp.vec2(wp.min(wp.min(pa0, pb0), wp.min(pa1, pb1)), wp.max(wp.max(pa0, pb0), wp.max(pa1, pb1)))
-
-
-@wp.func
-def _disjoint(x: wp.vec2, y: wp.vec2, pad: float) -> bool:
-    return x[1] + pad < y[0] or y[1] + pad < x[0]
 
 
 @wp.func

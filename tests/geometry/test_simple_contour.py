@@ -130,7 +130,11 @@ def test_non_star_simple_loops_pass(shape, device) -> None:
     assert _simple(tilted, l=(0.3, -0.2, 1.0), device=device)  # an affine image of the plane: still simple
     lift = np.concatenate([points, np.sin(points[:, :1])], axis=1)   # heights along l = z change nothing
     assert _simple(lift, device=device)
+
+
+def test_an_l_passes_in_both_orientations(device) -> None:
     assert _simple(L_SHAPE, device=device)
+    assert _simple(L_SHAPE[::-1], device=device)
 
 
 def test_straight_borders_of_many_collinear_edges_pass(device) -> None:
